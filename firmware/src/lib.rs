@@ -1,0 +1,1 @@
+//! ocm-firmware (being written).

@@ -1,0 +1,1 @@
+//! ocm-fem (being written).

@@ -1,0 +1,1 @@
+//! ocm-ident (being written).

@@ -1,0 +1,1 @@
+//! ocm-lutgen (being written).
