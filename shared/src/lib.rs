@@ -4,4 +4,6 @@
 //! and the host read the same bytes with the same code.
 #![no_std]
 
+pub mod lut;
 pub mod params;
+pub mod protocol;

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 /// Geometry and fitted stiffness of one OCM (one Yoshimura cylinder).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct OcmParams {
     /// Base side `L` of the isosceles crease triangle, metres.
     pub base_side_m: f64,
@@ -72,6 +73,7 @@ impl Default for OcmParams {
 
 /// Parameters of the manipulator made of OCM columns (Ch. 3.3.5, Table 3.1).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct ManipulatorParams {
     /// Radial distance `d` from the backbone to each OCM column, metres.
     pub column_radius_m: f64,

@@ -4,6 +4,10 @@ use clap::{Parser, Subcommand};
 
 mod cmd_fem;
 mod cmd_ident;
+mod cmd_lut;
+mod cmd_model;
+mod cmd_track;
+mod plot;
 
 /// Soft and origami robotics toolkit: physics, LUTs, firmware, simulation.
 #[derive(Parser, Debug)]
@@ -15,6 +19,14 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Build, check, plot and export the OCM lookup tables (LUT images).
+    #[command(subcommand)]
+    Lut(cmd_lut::LutCommand),
+    /// Evaluate the OCM energy model on data.
+    #[command(subcommand)]
+    Model(cmd_model::ModelCommand),
+    /// Run the dissertation's experiments in the virtual lab (plant + controllers).
+    Track(cmd_track::TrackArgs),
     /// Finite-element simulation of soft bodies (bellows manipulator, DIGIT gel).
     #[command(subcommand)]
     Fem(cmd_fem::FemCommand),
@@ -25,6 +37,9 @@ enum Command {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        Command::Lut(cmd) => cmd_lut::run(cmd),
+        Command::Model(cmd) => cmd_model::run(cmd),
+        Command::Track(args) => cmd_track::run(args),
         Command::Fem(cmd) => cmd_fem::run(cmd),
         Command::Ident(args) => cmd_ident::run(args),
     }

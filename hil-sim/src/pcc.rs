@@ -1,0 +1,147 @@
+//! Piecewise-constant-curvature kinematics of one segment in the plant's
+//! generalized coordinates.
+//!
+//! The plant's coordinates are `q = (S, bx, by)`: backbone arc length and
+//! the bending vector `b = theta (cos phi, sin phi)` (the polar PCC
+//! configuration `(S_c, theta_c, phi_c)` of eq 3.26 in Cartesian form). The
+//! columns sit at `beta_i = 0, 120, 240` degrees on radius `d`; `phi` is
+//! measured from column 1 towards column 2 (the firmware's convention), so
+//! the column lengths are linear in `q`: `l_i = S - d (cos beta_i bx + sin
+//! beta_i by)`. That linearity is why the bending vector, not the polar
+//! form, is the state: no singularity at the straight pose.
+
+use serde::{Deserialize, Serialize};
+
+/// `cos beta_i` of the three columns.
+pub const COS_BETA: [f64; 3] = [1.0, -0.5, -0.5];
+/// `sin beta_i` of the three columns.
+pub const SIN_BETA: [f64; 3] = [0.0, 0.866_025_403_784_438_6, -0.866_025_403_784_438_6];
+
+/// A segment configuration in the plant's coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Config {
+    /// Backbone arc length `S_c`, metres.
+    pub backbone_m: f64,
+    /// `theta cos phi`, radians.
+    pub bend_x_rad: f64,
+    /// `theta sin phi`, radians.
+    pub bend_y_rad: f64,
+}
+
+impl Config {
+    /// From the polar PCC form `(S_c, theta_c, phi_c)`.
+    pub fn from_polar(backbone_m: f64, bend_rad: f64, direction_rad: f64) -> Self {
+        Self {
+            backbone_m,
+            bend_x_rad: bend_rad * direction_rad.cos(),
+            bend_y_rad: bend_rad * direction_rad.sin(),
+        }
+    }
+
+    /// As an array `[S, bx, by]`.
+    pub fn to_array(self) -> [f64; 3] {
+        [self.backbone_m, self.bend_x_rad, self.bend_y_rad]
+    }
+
+    /// From an array `[S, bx, by]`.
+    pub fn from_array(a: [f64; 3]) -> Self {
+        Self {
+            backbone_m: a[0],
+            bend_x_rad: a[1],
+            bend_y_rad: a[2],
+        }
+    }
+
+    /// Bending angle `theta_c`, radians.
+    pub fn bend_rad(&self) -> f64 {
+        self.bend_x_rad.hypot(self.bend_y_rad)
+    }
+
+    /// Column lengths (inverse of eq 3.26), metres.
+    pub fn column_lengths(&self, d_m: f64) -> [f64; 3] {
+        std::array::from_fn(|i| {
+            self.backbone_m - d_m * (COS_BETA[i] * self.bend_x_rad + SIN_BETA[i] * self.bend_y_rad)
+        })
+    }
+
+    /// Configuration from column lengths (eq 3.26).
+    pub fn from_column_lengths(l: [f64; 3], d_m: f64) -> Self {
+        Self {
+            backbone_m: (l[0] + l[1] + l[2]) / 3.0,
+            bend_x_rad: (l[1] + l[2] - 2.0 * l[0]) / (3.0 * d_m),
+            bend_y_rad: (l[2] - l[1]) / (3.0_f64.sqrt() * d_m),
+        }
+    }
+
+    /// Plate-centre position in the base frame, metres.
+    pub fn position(&self) -> [f64; 3] {
+        let th = self.bend_rad();
+        // (1 - cos th) / th^2 = sinc^2(th/2) / 2 and sin th / th = sinc th:
+        // both smooth through the straight pose.
+        let lateral = 0.5 * self.backbone_m * sinc(0.5 * th).powi(2);
+        [
+            lateral * self.bend_x_rad,
+            lateral * self.bend_y_rad,
+            self.backbone_m * sinc(th),
+        ]
+    }
+
+    /// Plate orientation as a unit quaternion `[w, x, y, z]`: a turn by
+    /// `theta` about the in-plane axis `(-sin phi, cos phi, 0)`.
+    pub fn quaternion(&self) -> [f64; 4] {
+        let th = self.bend_rad();
+        let k = 0.5 * sinc(0.5 * th);
+        [
+            (0.5 * th).cos(),
+            -k * self.bend_y_rad,
+            k * self.bend_x_rad,
+            0.0,
+        ]
+    }
+
+    /// The configuration whose plate centre is at `p` (single segment): the
+    /// arc through the origin, tangent to z there, ending at `p`.
+    pub fn from_position(p: [f64; 3]) -> Option<Self> {
+        let r = p[0].hypot(p[1]);
+        if !(p.iter().all(|v| v.is_finite()) && p[2] > 0.0) {
+            return None;
+        }
+        let th = 2.0 * r.atan2(p[2]);
+        let chord = r.hypot(p[2]);
+        let s = chord / sinc(0.5 * th);
+        let dir = if r > 0.0 { p[1].atan2(p[0]) } else { 0.0 };
+        Some(Self::from_polar(s, th, dir))
+    }
+}
+
+/// `sin(x)/x`, exact through zero.
+pub fn sinc(x: f64) -> f64 {
+    if x.abs() < 1e-4 {
+        1.0 - x * x / 6.0
+    } else {
+        x.sin() / x
+    }
+}
+
+/// Geodesic angle between two unit quaternions (eq 3.42), radians.
+pub fn quaternion_error_rad(a: [f64; 4], b: [f64; 4]) -> f64 {
+    let dot: f64 = a.iter().zip(b).map(|(x, y)| x * y).sum();
+    2.0 * dot.abs().min(1.0).acos()
+}
+
+/// Hamilton product `a * b` of quaternions `[w, x, y, z]`.
+pub fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+    [
+        a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+        a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+        a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+        a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+    ]
+}
+
+/// Unit quaternion of the rotation vector `v` (axis times angle, radians).
+pub fn quat_from_rotvec(v: [f64; 3]) -> [f64; 4] {
+    let a = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let k = 0.5 * sinc(0.5 * a);
+    [(0.5 * a).cos(), k * v[0], k * v[1], k * v[2]]
+}

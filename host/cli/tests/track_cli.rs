@@ -1,0 +1,76 @@
+//! `ocm track` end to end: the virtual lab's summary, determinism and logs.
+
+use std::process::Command;
+
+fn track(args: &[&str]) -> serde_json::Value {
+    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
+        .arg("track")
+        .args(args)
+        .output()
+        .expect("the ocm binary runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("one JSON summary")
+}
+
+#[test]
+fn circle_summary_orders_the_controllers_and_is_deterministic() {
+    let a = track(&["--short", "--scenario", "circle", "--seed", "7", "--json"]);
+    let (ol, cl, oracle) = (
+        a["ol_rmse_mm"].as_f64().unwrap(),
+        a["cl_rmse_mm"].as_f64().unwrap(),
+        a["oracle_rmse_mm"].as_f64().unwrap(),
+    );
+    assert!(cl < 0.5 * ol, "closed loop {cl} mm vs open loop {ol} mm");
+    assert!(oracle < cl, "oracle {oracle} mm vs closed loop {cl} mm");
+    assert!(a["realtime_factor"].as_f64().unwrap() > 0.0);
+    let b = track(&["--short", "--scenario", "circle", "--seed", "7", "--json"]);
+    for key in ["ol_rmse_mm", "cl_rmse_mm", "oracle_rmse_mm"] {
+        assert_eq!(a[key], b[key], "{key} differs between runs with one seed");
+    }
+}
+
+#[test]
+fn logs_and_summary_are_written() {
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("track_logs");
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
+        .args(["track", "--short", "--scenario", "triangle", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary[0]["name"], "triangle");
+    let csvs: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.path().extension().is_some_and(|x| x == "csv"))
+        .collect();
+    assert_eq!(csvs.len(), 3, "one log per controller");
+    let text = std::fs::read_to_string(csvs[0].path()).unwrap();
+    assert!(
+        text.lines().next().unwrap().contains("_mm"),
+        "units in the header"
+    );
+    assert!(text.lines().count() > 10);
+}
+
+#[test]
+fn unknown_scenario_is_named() {
+    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
+        .args(["track", "--scenario", "zigzag"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("zigzag") && err.contains("circle"), "{err}");
+}

@@ -1,0 +1,329 @@
+//! Implicit time integration of M a + D v + f_int(x) = f_ext(x) (eq 2.2): backward Euler and Newmark.
+
+use super::linear::SparseSolver;
+use super::{NewtonOptions, norm, spmv};
+use crate::model::{Loads, Model, Pattern, State};
+use crate::{FemError, Result};
+use serde::{Deserialize, Serialize};
+
+/// Time integrator.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Integrator {
+    /// Backward (implicit) Euler, first order, numerically dissipative (SOFA's EulerImplicitSolver).
+    ImplicitEuler,
+    /// Newmark-beta; beta = 1/4, gamma = 1/2 is the energy-conserving average-acceleration rule.
+    Newmark {
+        /// beta.
+        beta: f64,
+        /// gamma.
+        gamma: f64,
+    },
+}
+
+impl Integrator {
+    /// Average-acceleration Newmark.
+    pub const AVERAGE_ACCELERATION: Integrator = Integrator::Newmark {
+        beta: 0.25,
+        gamma: 0.5,
+    };
+}
+
+/// What one time step did.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct StepReport {
+    /// Newton iterations.
+    pub iterations: usize,
+    /// Sub-steps taken (1 unless the step was cut).
+    pub substeps: usize,
+    /// Final residual, N.
+    pub residual: f64,
+}
+
+/// Dynamic solver with cached structure, mass and symbolic factorization.
+#[derive(Debug, Clone)]
+pub struct DynamicSolver {
+    /// Sparse structure.
+    pub pattern: Pattern,
+    linear: SparseSolver,
+    mass: Vec<f64>,
+    /// Integrator.
+    pub integrator: Integrator,
+    /// Newton controls.
+    pub options: NewtonOptions,
+    initialized: bool,
+    /// Tangent at the end of the last step (positions, pressures, values): the next step's damping.
+    cached_tangent: Option<(Vec<f64>, Vec<f64>, Vec<f64>)>,
+}
+
+impl DynamicSolver {
+    /// Prepares the solver.
+    pub fn new(model: &Model, integrator: Integrator) -> Result<Self> {
+        if let Integrator::Newmark { beta, gamma } = integrator
+            && !(beta > 0.0 && gamma >= 0.0 && beta.is_finite() && gamma.is_finite())
+        {
+            return Err(FemError::Model(format!(
+                "Newmark needs beta > 0, gamma >= 0 (got {beta}, {gamma})"
+            )));
+        }
+        let pattern = Pattern::new(model)?;
+        let linear = SparseSolver::new(
+            pattern.num_free(),
+            pattern.col_ptr.clone(),
+            pattern.row_idx.clone(),
+        );
+        let mass = model.mass_values(&pattern);
+        Ok(DynamicSolver {
+            pattern,
+            linear,
+            mass,
+            integrator,
+            options: NewtonOptions::default(),
+            initialized: false,
+            cached_tangent: None,
+        })
+    }
+
+    /// Kinetic energy 1/2 v^T M v, J.
+    pub fn kinetic_energy(model: &Model, state: &State) -> f64 {
+        let mv = model.mass_times(&state.v);
+        0.5 * mv.iter().zip(&state.v).map(|(a, b)| a * b).sum::<f64>()
+    }
+
+    fn free(&self, full: &[f64]) -> Vec<f64> {
+        self.pattern.dof_of.iter().map(|&d| full[d]).collect()
+    }
+
+    /// Advances `state` by `dt` seconds; halves the step (up to the minimum fraction) on failure.
+    pub fn step(
+        &mut self,
+        model: &Model,
+        state: &mut State,
+        loads: &Loads,
+        dt: f64,
+    ) -> Result<StepReport> {
+        if !(dt > 0.0 && dt.is_finite()) {
+            return Err(FemError::Model(format!("time step {dt} must be positive")));
+        }
+        if !self.initialized {
+            self.initial_acceleration(model, state, loads)?;
+            self.initialized = true;
+        }
+        let mut rep = StepReport::default();
+        let mut remaining = dt;
+        let mut h = dt;
+        while remaining > 1e-15 * dt {
+            h = h.min(remaining);
+            let saved = state.clone();
+            match self.substep(model, state, loads, h, &mut rep) {
+                Ok(()) => {
+                    remaining -= h;
+                    rep.substeps += 1;
+                }
+                Err(e) => {
+                    *state = saved;
+                    h *= 0.5;
+                    if h < self.options.min_step * dt {
+                        return Err(match e {
+                            FemError::NoConvergence { residual, .. } => FemError::NoConvergence {
+                                what: format!("time step at t = {:.6} s", state.t),
+                                load_fraction: 1.0 - remaining / dt,
+                                residual,
+                                step: h,
+                            },
+                            other => other,
+                        });
+                    }
+                }
+            }
+        }
+        Ok(rep)
+    }
+
+    /// a0 = M^-1 (f_ext - f_int - D v0) so that Newmark starts consistently.
+    fn initial_acceleration(
+        &mut self,
+        model: &Model,
+        state: &mut State,
+        loads: &Loads,
+    ) -> Result<()> {
+        let ev = model.evaluate(&self.pattern, &state.x, loads, 1.0, true)?;
+        let k = ev
+            .tangent
+            .as_ref()
+            .ok_or_else(|| FemError::Linear("tangent missing".into()))?;
+        let vf = self.free(&state.v);
+        let mv = spmv(&self.pattern, &self.mass, &vf);
+        let kv = spmv(&self.pattern, k, &vf);
+        let mut rhs: Vec<f64> = self
+            .pattern
+            .dof_of
+            .iter()
+            .enumerate()
+            .map(|(j, &d)| {
+                ev.f_ext[d]
+                    - ev.f_int[d]
+                    - model.rayleigh_alpha * mv[j]
+                    - model.rayleigh_beta * kv[j]
+            })
+            .collect();
+        let m = self.mass.clone();
+        self.linear.solve(&m, &mut rhs)?;
+        state.a = vec![0.0; state.x.len()];
+        for (j, &d) in self.pattern.dof_of.iter().enumerate() {
+            state.a[d] = rhs[j];
+        }
+        Ok(())
+    }
+
+    fn substep(
+        &mut self,
+        model: &Model,
+        state: &mut State,
+        loads: &Loads,
+        h: f64,
+        rep: &mut StepReport,
+    ) -> Result<()> {
+        let (ca, cv) = match self.integrator {
+            Integrator::ImplicitEuler => (1.0 / (h * h), 1.0 / h),
+            Integrator::Newmark { beta, gamma } => (1.0 / (beta * h * h), gamma / (beta * h)),
+        };
+        let xn = state.x.clone();
+        let vn = state.v.clone();
+        let an = state.a.clone();
+        let accel_vel = |x: &[f64], d: usize| -> (f64, f64) {
+            let dx = x[d] - xn[d];
+            match self.integrator {
+                Integrator::ImplicitEuler => (dx / (h * h) - vn[d] / h, dx / h),
+                Integrator::Newmark { beta, gamma } => {
+                    let a = dx / (beta * h * h) - vn[d] / (beta * h) - (0.5 / beta - 1.0) * an[d];
+                    (a, vn[d] + h * ((1.0 - gamma) * an[d] + gamma * a))
+                }
+            }
+        };
+        // Rayleigh damping with the stiffness frozen at the start of the step.
+        let k_n = match self.cached_tangent.take() {
+            Some((cx, cp, k)) if cx == xn && cp == loads.pressures_pa => k,
+            _ => model
+                .evaluate(&self.pattern, &xn, loads, 1.0, true)?
+                .tangent
+                .ok_or_else(|| FemError::Linear("tangent missing".into()))?,
+        };
+        let damp: Vec<f64> = self
+            .mass
+            .iter()
+            .zip(&k_n)
+            .map(|(m, k)| model.rayleigh_alpha * m + model.rayleigh_beta * k)
+            .collect();
+        let residual = |ev: &crate::model::Evaluation, x: &[f64]| -> (Vec<f64>, f64) {
+            let mut af = Vec::with_capacity(self.pattern.num_free());
+            let mut vf = Vec::with_capacity(self.pattern.num_free());
+            for &d in &self.pattern.dof_of {
+                let (a, v) = accel_vel(x, d);
+                af.push(a);
+                vf.push(v);
+            }
+            let ma = spmv(&self.pattern, &self.mass, &af);
+            let dv = spmv(&self.pattern, &damp, &vf);
+            let r: Vec<f64> = self
+                .pattern
+                .dof_of
+                .iter()
+                .enumerate()
+                .map(|(j, &d)| ma[j] + dv[j] + ev.f_int[d] - ev.f_ext[d])
+                .collect();
+            let scale = norm(&ev.f_int).max(norm(&ev.f_ext)).max(norm(&ma));
+            (r, scale)
+        };
+        let opts = self.options;
+        let mut x = xn.clone();
+        for d in 0..x.len() {
+            if model.fixed[d] {
+                x[d] = model.rest[d / 3][d % 3] + model.prescribed[d];
+            }
+        }
+        // Predictor: constant velocity.
+        for &d in &self.pattern.dof_of {
+            x[d] += h * vn[d];
+        }
+        let mut ev = model.evaluate(&self.pattern, &x, loads, 1.0, true)?;
+        let (mut r, mut scale) = residual(&ev, &x);
+        let mut rn = norm(&r);
+        let mut converged = false;
+        for _ in 0..opts.max_iterations {
+            if rn <= opts.rtol * scale || rn == 0.0 {
+                converged = true;
+                break;
+            }
+            rep.iterations += 1;
+            let k = ev
+                .tangent
+                .as_ref()
+                .ok_or_else(|| FemError::Linear("tangent missing".into()))?;
+            let jac: Vec<f64> = (0..k.len())
+                .map(|i| ca * self.mass[i] + cv * damp[i] + k[i])
+                .collect();
+            let mut dx: Vec<f64> = r.iter().map(|v| -v).collect();
+            self.linear.solve(&jac, &mut dx)?;
+            let pattern = &self.pattern;
+            let x0 = x.clone();
+            let found = super::line_search(
+                |alpha| {
+                    let mut xt = x0.clone();
+                    for (j, &d) in pattern.dof_of.iter().enumerate() {
+                        xt[d] += alpha * dx[j];
+                    }
+                    let evt = model.evaluate(pattern, &xt, loads, 1.0, alpha == 1.0)?;
+                    let (r, scale) = residual(&evt, &xt);
+                    Ok(super::Trial {
+                        r,
+                        scale,
+                        data: (xt, evt),
+                    })
+                },
+                &dx,
+                &r,
+                opts.max_backtracks,
+            )?;
+            let Some((alpha, t)) = found else { break };
+            let (xt, evt) = t.data;
+            ev = if evt.tangent.is_some() {
+                evt
+            } else {
+                model.evaluate(&self.pattern, &xt, loads, 1.0, true)?
+            };
+            x = xt;
+            r = t.r;
+            scale = t.scale;
+            rn = norm(&r);
+            if alpha * norm(&dx) <= opts.dx_tol {
+                converged = true;
+                break;
+            }
+        }
+        if !converged && rn > opts.stall_rtol * scale {
+            return Err(FemError::NoConvergence {
+                what: "dynamic Newton".into(),
+                load_fraction: 0.0,
+                residual: rn,
+                step: h,
+            });
+        }
+        rep.residual = rn;
+        let mut v = vec![0.0; x.len()];
+        let mut a = vec![0.0; x.len()];
+        for &d in &self.pattern.dof_of {
+            let (ad, vd) = accel_vel(&x, d);
+            a[d] = ad;
+            v[d] = vd;
+        }
+        if let Some(k) = ev.tangent.take() {
+            self.cached_tangent = Some((x.clone(), loads.pressures_pa.clone(), k));
+        }
+        state.x = x;
+        state.v = v;
+        state.a = a;
+        state.t += h;
+        Ok(())
+    }
+}

@@ -1,0 +1,235 @@
+//! The clean physics baseline: the lead's energy model (`ocm_lutgen::OcmModel`, eq 3.9 and
+//! 3.20-3.21) sampled once on fine grids and interpolated with cubic Catmull-Rom splines, so
+//! that fitting and data generation cost a table lookup per row instead of an energy
+//! derivative. The interpolation error is checked against the model in the tests.
+
+use std::sync::OnceLock;
+
+use ocm_lutgen::OcmModel;
+use ocm_shared::params::OcmParams;
+
+use crate::error::IdentError;
+
+/// Number of strain nodes of the axial table.
+const AXIAL_NODES: usize = 1201;
+/// Nodes of the bending table along initial strain and along the normalised angle.
+const BEND_STRAIN_NODES: usize = 61;
+const BEND_ANGLE_NODES: usize = 81;
+/// Fraction of the largest feasible bend covered by the table.
+const BEND_FRACTION: f64 = 0.97;
+
+/// Tabulated axial and bending terms of one OCM.
+#[derive(Debug, Clone)]
+pub struct Physics {
+    /// The parameters the model was built from.
+    pub params: OcmParams,
+    strain_lo: f64,
+    strain_hi: f64,
+    /// (bar_n, hinge_n, pressure_n_per_pa) per strain node.
+    axial: Vec<[f64; 3]>,
+    bend_lo: f64,
+    bend_hi: f64,
+    /// max bend angle per bending strain node.
+    bend_max: Vec<f64>,
+    /// (bar_nm, hinge_nm, pressure_nm_per_pa) on [strain node][angle node].
+    bend: Vec<[f64; 3]>,
+}
+
+/// Catmull-Rom interpolation of `f` sampled at unit spacing, at fractional index `x`.
+fn cubic(x: f64, n: usize, f: impl Fn(usize) -> f64) -> f64 {
+    let xm = x.clamp(0.0, (n - 1) as f64);
+    let i = (xm.floor() as usize).min(n - 2);
+    let t = xm - i as f64;
+    let p1 = f(i);
+    let p2 = f(i + 1);
+    let p0 = if i > 0 { f(i - 1) } else { 2.0 * p1 - p2 };
+    let p3 = if i + 2 < n { f(i + 2) } else { 2.0 * p2 - p1 };
+    let t2 = t * t;
+    let t3 = t2 * t;
+    0.5 * (2.0 * p1
+        + (-p0 + p2) * t
+        + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t2
+        + (-p0 + 3.0 * p1 - 3.0 * p2 + p3) * t3)
+}
+
+impl Physics {
+    /// Builds the tables from the energy model with the given parameters.
+    pub fn new(params: OcmParams) -> Result<Self, IdentError> {
+        let model = OcmModel::new(params).map_err(|e| IdentError::Model(e.to_string()))?;
+        let (lo, hi) = model.strain_limits();
+        // Stay clear of the fully folded and fully open singular ends.
+        let strain_lo = lo + 0.05 * (hi - lo);
+        let strain_hi = hi - 0.02 * (hi - lo);
+        let axial = (0..AXIAL_NODES)
+            .map(|i| {
+                let e = strain_lo + (strain_hi - strain_lo) * i as f64 / (AXIAL_NODES - 1) as f64;
+                let t = model.axial_terms(e);
+                [t.bar_n, t.hinge_n, t.pressure_n_per_pa]
+            })
+            .collect();
+        let bend_lo = strain_lo;
+        let bend_hi = strain_hi;
+        let mut bend_max = Vec::with_capacity(BEND_STRAIN_NODES);
+        let mut bend = Vec::with_capacity(BEND_STRAIN_NODES * BEND_ANGLE_NODES);
+        for i in 0..BEND_STRAIN_NODES {
+            let e = bend_lo + (bend_hi - bend_lo) * i as f64 / (BEND_STRAIN_NODES - 1) as f64;
+            let m = model.max_bend_angle_rad(e);
+            bend_max.push(m);
+            for j in 0..BEND_ANGLE_NODES {
+                let a = BEND_FRACTION * (2.0 * j as f64 / (BEND_ANGLE_NODES - 1) as f64 - 1.0);
+                let t = model.bending_terms(a * m, e);
+                bend.push([t.bar_nm, t.hinge_nm, t.pressure_nm_per_pa]);
+            }
+        }
+        Ok(Self {
+            params,
+            strain_lo,
+            strain_hi,
+            axial,
+            bend_lo,
+            bend_hi,
+            bend_max,
+            bend,
+        })
+    }
+
+    /// The Table 3.1 model, built once per process.
+    pub fn table_3_1() -> &'static Physics {
+        static CELL: OnceLock<Physics> = OnceLock::new();
+        CELL.get_or_init(|| {
+            Physics::new(OcmParams::TABLE_3_1).expect("Table 3.1 parameters are valid")
+        })
+    }
+
+    /// Strain range covered by the tables.
+    pub fn strain_range(&self) -> (f64, f64) {
+        (self.strain_lo, self.strain_hi)
+    }
+
+    /// Axial terms `(bar_n, hinge_n, pressure_n_per_pa)`: `F = bar + hinge + P * pressure`.
+    pub fn axial(&self, strain: f64) -> [f64; 3] {
+        let x = (strain - self.strain_lo) / (self.strain_hi - self.strain_lo)
+            * (AXIAL_NODES - 1) as f64;
+        let mut out = [0.0; 3];
+        for (k, o) in out.iter_mut().enumerate() {
+            *o = cubic(x, AXIAL_NODES, |i| self.axial[i][k]);
+        }
+        out
+    }
+
+    /// Axial force `F_A(eps, P)`, newtons, with stiffness scale factors on `k_b` and `k_h`.
+    pub fn axial_force(&self, strain: f64, pressure_pa: f64, scale_b: f64, scale_h: f64) -> f64 {
+        let t = self.axial(strain);
+        scale_b * t[0] + scale_h * t[1] + pressure_pa * t[2]
+    }
+
+    /// Largest feasible bend angle at initial strain `strain0`, radians.
+    pub fn max_bend(&self, strain0: f64) -> f64 {
+        let x = (strain0 - self.bend_lo) / (self.bend_hi - self.bend_lo)
+            * (BEND_STRAIN_NODES - 1) as f64;
+        cubic(x, BEND_STRAIN_NODES, |i| self.bend_max[i])
+    }
+
+    /// Usable bend angle at `strain0` (the tabulated fraction of the largest one).
+    pub fn bend_limit(&self, strain0: f64) -> f64 {
+        BEND_FRACTION * self.max_bend(strain0)
+    }
+
+    /// Bending terms `(bar_nm, hinge_nm, pressure_nm_per_pa)` at `(angle, strain0)`.
+    pub fn bending(&self, angle_rad: f64, strain0: f64) -> [f64; 3] {
+        let xs = (strain0 - self.bend_lo) / (self.bend_hi - self.bend_lo)
+            * (BEND_STRAIN_NODES - 1) as f64;
+        let m = self.max_bend(strain0);
+        let a = if m > 0.0 {
+            angle_rad / m / BEND_FRACTION
+        } else {
+            0.0
+        };
+        let xa = (a + 1.0) * 0.5 * (BEND_ANGLE_NODES - 1) as f64;
+        let mut out = [0.0; 3];
+        for (k, o) in out.iter_mut().enumerate() {
+            *o = cubic(xs, BEND_STRAIN_NODES, |i| {
+                cubic(xa, BEND_ANGLE_NODES, |j| {
+                    self.bend[i * BEND_ANGLE_NODES + j][k]
+                })
+            });
+        }
+        out
+    }
+
+    /// Pressure that holds a free cylinder at `strain0` (zero axial force), pascals.
+    pub fn free_pressure(&self, strain0: f64, scale_b: f64, scale_h: f64) -> f64 {
+        let t = self.axial(strain0);
+        if t[2].abs() < 1e-30 {
+            return 0.0;
+        }
+        -(scale_b * t[0] + scale_h * t[1]) / t[2]
+    }
+
+    /// The two stiffness-proportional bending regressors at a free-standing initial strain:
+    /// `M = s_b * out[0] + s_h * out[1]` with the pressure set by [`Self::free_pressure`].
+    pub fn free_bending_terms(&self, angle_rad: f64, strain0: f64) -> [f64; 2] {
+        let a = self.axial(strain0);
+        let b = self.bending(angle_rad, strain0);
+        if a[2].abs() < 1e-30 {
+            return [b[0], b[1]];
+        }
+        [b[0] - a[0] * b[2] / a[2], b[1] - a[1] * b[2] / a[2]]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tables_match_the_energy_model() {
+        let p = Physics::table_3_1();
+        let model = OcmModel::new(OcmParams::TABLE_3_1).unwrap();
+        let (lo, hi) = p.strain_range();
+        let mut worst: f64 = 0.0;
+        for k in 0..97 {
+            let e = lo + (hi - lo) * (k as f64 + 0.37) / 97.5;
+            let t = model.axial_terms(e);
+            let a = p.axial(e);
+            let scale = t.bar_n.abs() + t.hinge_n.abs() + 1e3 * t.pressure_n_per_pa.abs() + 1e-3;
+            let err = (a[0] - t.bar_n).abs()
+                + (a[1] - t.hinge_n).abs()
+                + 1e3 * (a[2] - t.pressure_n_per_pa).abs();
+            worst = worst.max(err / scale);
+        }
+        assert!(worst < 1e-4, "axial relative table error {worst}");
+        let mut worst: f64 = 0.0;
+        for k in 0..23 {
+            let e = -0.5 + 0.9 * k as f64 / 22.0;
+            for j in 0..9 {
+                let ang = p.bend_limit(e) * (j as f64 / 8.5 - 0.5) * 1.9;
+                let t = model.bending_terms(ang, e);
+                let b = p.bending(ang, e);
+                let scale =
+                    t.bar_nm.abs() + t.hinge_nm.abs() + 1e3 * t.pressure_nm_per_pa.abs() + 1e-5;
+                let err = (b[0] - t.bar_nm).abs()
+                    + (b[1] - t.hinge_nm).abs()
+                    + 1e3 * (b[2] - t.pressure_nm_per_pa).abs();
+                worst = worst.max(err / scale);
+            }
+        }
+        assert!(worst < 1e-2, "bending relative table error {worst}");
+    }
+
+    #[test]
+    fn print_ranges() {
+        let p = Physics::table_3_1();
+        let (lo, hi) = p.strain_range();
+        eprintln!("strain range {lo} {hi}");
+        for e in [-0.6, -0.3, 0.0, 0.3, 0.6] {
+            eprintln!(
+                "eps {e}: axial {:?} maxbend {} free P {}",
+                p.axial(e),
+                p.max_bend(e),
+                p.free_pressure(e, 1.0, 1.0)
+            );
+            eprintln!("   bending at half {:?}", p.bending(0.5 * p.max_bend(e), e));
+        }
+    }
+}

@@ -1,0 +1,196 @@
+//! Causal signal operators used by diagnostics and model extensions. Every operator restarts
+//! at each segment start (a new trial), because memory does not carry across trials.
+
+/// Contiguous row ranges `[start, end)` of the segments given by their start rows.
+pub fn segments(starts: &[usize], n: usize) -> Vec<(usize, usize)> {
+    let mut out = Vec::with_capacity(starts.len());
+    for (i, &s) in starts.iter().enumerate() {
+        let e = starts.get(i + 1).copied().unwrap_or(n);
+        if e > s {
+            out.push((s, e));
+        }
+    }
+    out
+}
+
+/// First-order low-pass with time constant `tau_s` (exact discretisation for held input).
+pub fn lowpass(x: &[f64], time_s: &[f64], starts: &[usize], tau_s: f64) -> Vec<f64> {
+    let mut y = vec![0.0; x.len()];
+    for (s, e) in segments(starts, x.len()) {
+        let mut state = x[s];
+        y[s] = state;
+        for i in s + 1..e {
+            let dt = (time_s[i] - time_s[i - 1]).max(0.0);
+            let a = if tau_s > 0.0 {
+                (-dt / tau_s).exp()
+            } else {
+                0.0
+            };
+            state = a * state + (1.0 - a) * x[i];
+            y[i] = state;
+        }
+    }
+    y
+}
+
+/// Dead time of `delay` samples: each row takes the value `delay` rows earlier in its segment
+/// (the first value is held at the segment start).
+pub fn delay_samples(x: &[f64], starts: &[usize], delay: usize) -> Vec<f64> {
+    let mut y = vec![0.0; x.len()];
+    for (s, e) in segments(starts, x.len()) {
+        for i in s..e {
+            y[i] = x[i.saturating_sub(delay).max(s)];
+        }
+    }
+    y
+}
+
+/// Play (backlash) operator of half-width `r`, the building block of the Prandtl-Ishlinskii
+/// model; starts centred on the first input of each segment.
+pub fn play(x: &[f64], starts: &[usize], r: f64) -> Vec<f64> {
+    let mut y = vec![0.0; x.len()];
+    for (s, e) in segments(starts, x.len()) {
+        let mut state = x[s];
+        for i in s..e {
+            state = state.clamp(x[i] - r, x[i] + r);
+            y[i] = state;
+        }
+    }
+    y
+}
+
+/// Accumulated path length `sum |dx|`, not reset between segments (damage persists).
+pub fn path_length(x: &[f64]) -> Vec<f64> {
+    let mut acc = 0.0;
+    let mut out = Vec::with_capacity(x.len());
+    for i in 0..x.len() {
+        if i > 0 {
+            acc += (x[i] - x[i - 1]).abs();
+        }
+        out.push(acc);
+    }
+    out
+}
+
+/// Running maximum of `|x - reference|`, not reset between segments.
+pub fn running_peak(x: &[f64], reference: f64) -> Vec<f64> {
+    let mut m: f64 = 0.0;
+    x.iter()
+        .map(|v| {
+            m = m.max((v - reference).abs());
+            m
+        })
+        .collect()
+}
+
+/// Backward-difference rate `dx/dt` (zero at segment starts).
+pub fn rate(x: &[f64], time_s: &[f64], starts: &[usize]) -> Vec<f64> {
+    let mut r = vec![0.0; x.len()];
+    for (s, e) in segments(starts, x.len()) {
+        for i in s + 1..e {
+            let dt = time_s[i] - time_s[i - 1];
+            r[i] = if dt > 0.0 {
+                (x[i] - x[i - 1]) / dt
+            } else {
+                0.0
+            };
+        }
+        if e > s + 1 {
+            r[s] = r[s + 1];
+        }
+    }
+    r
+}
+
+/// Median sampling interval, seconds (robust to gaps between trials).
+pub fn median_dt(time_s: &[f64]) -> f64 {
+    let mut d: Vec<f64> = time_s
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|v| *v > 0.0 && v.is_finite())
+        .collect();
+    if d.is_empty() {
+        return 1.0;
+    }
+    d.sort_by(f64::total_cmp);
+    d[d.len() / 2]
+}
+
+/// Mean and population standard deviation.
+pub fn mean_std(x: &[f64]) -> (f64, f64) {
+    if x.is_empty() {
+        return (0.0, 0.0);
+    }
+    let n = x.len() as f64;
+    let m = x.iter().sum::<f64>() / n;
+    let v = x.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / n;
+    (m, v.sqrt())
+}
+
+/// Root mean square.
+pub fn rms(x: &[f64]) -> f64 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len() as f64).sqrt()
+}
+
+/// Pearson correlation (0 when either side is constant).
+pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
+    let (ma, sa) = mean_std(a);
+    let (mb, sb) = mean_std(b);
+    if sa == 0.0 || sb == 0.0 {
+        return 0.0;
+    }
+    let n = a.len().min(b.len()) as f64;
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - ma) * (y - mb))
+        .sum::<f64>()
+        / (n * sa * sb)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lowpass_step_response_matches_exponential() {
+        let t: Vec<f64> = (0..200).map(|i| i as f64 * 0.01).collect();
+        let mut x = vec![1.0; 200];
+        x[0] = 0.0;
+        let y = lowpass(&x, &t, &[0], 0.3);
+        for i in 1..200 {
+            let exact = 1.0 - (-(t[i]) / 0.3).exp();
+            assert!((y[i] - exact).abs() < 1e-12, "{i}");
+        }
+    }
+
+    #[test]
+    fn play_operator_lags_by_its_width_and_holds_at_reversal() {
+        let x: Vec<f64> = (0..=20).chain((0..20).rev()).map(|i| i as f64).collect();
+        let y = play(&x, &[0], 2.0);
+        assert_eq!(y[10], 8.0);
+        assert_eq!(y[20], 18.0);
+        // after the reversal the output stays until the input has moved back 2r
+        assert_eq!(y[22], 18.0);
+        assert_eq!(y[24], 18.0);
+        assert_eq!(y[25], 17.0);
+    }
+
+    #[test]
+    fn operators_restart_at_segment_starts() {
+        let x = [0.0, 5.0, 5.0, 10.0, 10.0];
+        let d = delay_samples(&x, &[0, 3], 1);
+        assert_eq!(d, vec![0.0, 0.0, 5.0, 10.0, 10.0]);
+        let p = play(&x, &[0, 3], 1.0);
+        assert_eq!(p[3], 10.0);
+    }
+
+    #[test]
+    fn path_and_peak_accumulate() {
+        let x = [0.0, 1.0, -1.0, 0.5];
+        assert_eq!(path_length(&x), vec![0.0, 1.0, 3.0, 4.5]);
+        assert_eq!(running_peak(&x, 0.0), vec![0.0, 1.0, 1.0, 1.0]);
+    }
+}

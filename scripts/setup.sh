@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Installs what the ocm build and tests need on a fresh machine:
+# the Cortex-M4F Rust target, clippy/rustfmt, and QEMU for the emulated MCU.
+# Idempotent and quiet when everything is already there.
+set -euo pipefail
+
+if ! command -v cargo >/dev/null 2>&1; then
+    echo "setup: cargo not found; install Rust (rustup) first" >&2
+    exit 1
+fi
+
+if command -v rustup >/dev/null 2>&1; then
+    if ! rustup target list --installed 2>/dev/null | grep -qx thumbv7em-none-eabihf; then
+        echo "setup: adding Rust target thumbv7em-none-eabihf"
+        rustup target add thumbv7em-none-eabihf
+    fi
+    for c in clippy rustfmt; do
+        if ! rustup component list --installed 2>/dev/null | grep -q "^$c"; then
+            echo "setup: adding Rust component $c"
+            rustup component add "$c"
+        fi
+    done
+fi
+
+if ! command -v qemu-system-arm >/dev/null 2>&1; then
+    echo "setup: installing qemu-system-arm"
+    SUDO=""
+    if [ "$(id -u)" != 0 ] && command -v sudo >/dev/null 2>&1; then SUDO=sudo; fi
+    export DEBIAN_FRONTEND=noninteractive
+    $SUDO apt-get update -qq
+    $SUDO apt-get install -y -qq --no-install-recommends qemu-system-arm >/dev/null
+fi
