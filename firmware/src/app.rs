@@ -29,8 +29,8 @@ use crate::control::{Controller, GainsFx, LimitsFx, TickConsts};
 use crate::estimate::{estimate, imu_tilt};
 use crate::fx::{PI_Q28, sat};
 use crate::kinematics::{
-    InverseSolution, LoadFx, Model, configs_for_tip, forward, inverse, inverse_with_hint,
-    lengths_from_vector, tip_position,
+    InverseSolution, LoadFx, Model, PreparedLoad, configs_for_tip, forward_prepared,
+    inverse_prepared, lengths_from_vector, prime_bending, tip_position,
 };
 use crate::maps::{BendEntry, FastLut, MemoBend};
 use crate::safety::{DEFAULT_SAFETY, StuckTracker, check_frame, link_lost};
@@ -94,7 +94,20 @@ enum Lut<'a> {
 
 struct TargetState {
     configs: Vec<SegmentConfig, MAX_SEGMENTS>,
-    load: LoadFx,
+    load: PreparedLoad,
+    /// Mean pressure of each segment's feedforward solution, Pa Q24.8: the
+    /// tick evaluates the bending map there. Fixed per target, load,
+    /// geometry and limits, so the memo primed by `handle` always answers.
+    bend_p_q8: [i32; MAX_SEGMENTS],
+}
+
+/// Mean pressure of each segment of an inverse solution, Pa Q24.8.
+fn segment_means(sol: &InverseSolution) -> [i32; MAX_SEGMENTS] {
+    let mut out = [0i32; MAX_SEGMENTS];
+    for (o, p) in out.iter_mut().zip(sol.pressures_q8.chunks_exact(3)) {
+        *o = sat((i64::from(p[0]) + i64::from(p[1]) + i64::from(p[2])) / 3);
+    }
+    out
 }
 
 /// The firmware application state.
@@ -256,6 +269,7 @@ impl<'a> App<'a> {
                     for ch in self.ctrl.channels.iter_mut() {
                         ch.output_q8 = l.clamp(ch.output_q8);
                     }
+                    self.refresh_bend_pressures();
                     ReplyBody::Ack
                 }
                 None => {
@@ -287,7 +301,44 @@ impl<'a> App<'a> {
                 ReplyBody::Ack
             }
         };
+        if !matches!(cmd.body, CommandBody::SensorFrame(_)) {
+            self.prime_bend_memo();
+        }
         Reply { seq: cmd.seq, body }
+    }
+
+    /// Runs the bending lookups the next control tick will make, so that a
+    /// new target, load, geometry or LUT costs its bisection here rather
+    /// than inside the tick (which still computes it on a memo miss).
+    // Out of line: its frame stays out of `handle`'s.
+    #[inline(never)]
+    fn prime_bend_memo(&self) {
+        let (Some(img), Some(t)) = (self.lut(), &self.target) else {
+            return;
+        };
+        let maps = MemoBend::new(img, &self.bend_memo);
+        prime_bending(&maps, &self.model, &t.load, &t.configs, &t.bend_p_q8);
+    }
+
+    /// Recomputes the target's bending pressures after the LUT, geometry or
+    /// limits changed (kept as they were when the target is now out of
+    /// reach: the next tick then reports the model fault).
+    #[inline(never)]
+    fn refresh_bend_pressures(&mut self) {
+        let (Some(img), Some(t)) = (self.lut(), &self.target) else {
+            return;
+        };
+        let sol = inverse_prepared(
+            img,
+            &self.model,
+            &t.load,
+            &t.configs,
+            (self.limits.min_q8, self.limits.max_q8),
+            None,
+        );
+        if let (Some(sol), Some(t)) = (sol, &mut self.target) {
+            t.bend_p_q8 = segment_means(&sol);
+        }
     }
 
     fn info(&self) -> Info {
@@ -361,6 +412,7 @@ impl<'a> App<'a> {
         }
     }
 
+    #[inline(never)]
     fn lut_commit(&mut self) -> ReplyBody {
         let want_hash = self.geometry.ocm.hash();
         // Validate through a shared reborrow first, so a failure leaves the
@@ -403,6 +455,7 @@ impl<'a> App<'a> {
         match LutImage::parse(bytes) {
             Ok(img) => {
                 self.lut = Lut::Loaded(FastLut::new(img));
+                self.refresh_bend_pressures();
                 ReplyBody::LutLoaded {
                     param_hash: img.param_hash(),
                     len: total,
@@ -468,6 +521,7 @@ impl<'a> App<'a> {
         }
         self.geometry = *g;
         self.model = model;
+        self.refresh_bend_pressures();
         ReplyBody::Ack
     }
 
@@ -479,6 +533,7 @@ impl<'a> App<'a> {
         }
     }
 
+    #[inline(never)]
     fn set_target(&mut self, t: &Target) -> ReplyBody {
         let Some(load) = LoadFx::new(&t.load, &self.model) else {
             return err(ProtocolError::InvalidArgument { field: Field::Load });
@@ -515,23 +570,30 @@ impl<'a> App<'a> {
                 }
             },
         };
-        if let Some(img) = self.lut()
-            && inverse(
+        let load = PreparedLoad::new(&load);
+        let mut bend_p_q8 = [0; MAX_SEGMENTS];
+        if let Some(img) = self.lut() {
+            let Some(sol) = inverse_prepared(
                 img,
                 &self.model,
                 &load,
                 &configs,
-                self.limits.min_q8,
-                self.limits.max_q8,
-            )
-            .is_none()
-        {
-            return err(ProtocolError::Unreachable);
+                (self.limits.min_q8, self.limits.max_q8),
+                None,
+            ) else {
+                return err(ProtocolError::Unreachable);
+            };
+            bend_p_q8 = segment_means(&sol);
         }
-        self.target = Some(TargetState { configs, load });
+        self.target = Some(TargetState {
+            configs,
+            load,
+            bend_p_q8,
+        });
         ReplyBody::Ack
     }
 
+    #[inline(never)]
     fn calibrate(&mut self, c: &Calibration) -> ReplyBody {
         if self.running() {
             return err(ProtocolError::WrongMode { mode: self.mode });
@@ -552,6 +614,9 @@ impl<'a> App<'a> {
     }
 
     /// One control tick on a sensor sample (Fig 3.7).
+    // Out of line, like the other big handlers: `handle` inlines the
+    // rest, and its frame would hold the union of their locals.
+    #[inline(never)]
     fn control_tick(&mut self, f: &SensorFrame) -> ReplyBody {
         let n = self.actuators();
         if f.hall_codes.len() != n || f.pressures_pa.len() != n {
@@ -597,7 +662,7 @@ impl<'a> App<'a> {
             let commanded = self.commanded();
             match (self.lut(), &self.target) {
                 (Some(img), Some(t)) => {
-                    forward(img, &self.model, &t.load, &commanded[..n]).unwrap_or_default()
+                    forward_prepared(img, &self.model, &t.load, &commanded[..n]).unwrap_or_default()
                 }
                 _ => Vec::new(),
             }
@@ -633,25 +698,17 @@ impl<'a> App<'a> {
             self.enter_safe();
             return;
         };
-        // The bending map runs once, at each segment's last mean command
-        // rounded to 1 kPa (its pressure dependence is weak), and is
-        // memoized: under a steady load the bisection runs only on change.
-        const KPA_Q8: i64 = 256_000;
-        let mut hint = [0i32; MAX_SEGMENTS];
-        for (seg, h) in hint.iter_mut().enumerate().take(self.model.segments) {
-            let c = &self.ctrl.channels[3 * seg..3 * seg + 3];
-            let sum: i64 = c.iter().map(|ch| i64::from(ch.output_q8)).sum();
-            *h = sat((sum / 3 + KPA_Q8 / 2).div_euclid(KPA_Q8) * KPA_Q8);
-        }
+        // The bending map runs once, at the target's own feedforward mean
+        // pressure (its pressure dependence is weak), from the memo that
+        // `handle` primed.
         let maps = MemoBend::new(img, &self.bend_memo);
-        let ff: Option<InverseSolution> = inverse_with_hint(
+        let ff: Option<InverseSolution> = inverse_prepared(
             &maps,
             &self.model,
             &t.load,
             &t.configs,
-            self.limits.min_q8,
-            self.limits.max_q8,
-            Some(&hint),
+            (self.limits.min_q8, self.limits.max_q8),
+            Some(&t.bend_p_q8),
         );
         let Some(ff) = ff else {
             self.faults |= fault::MODEL;
@@ -742,5 +799,99 @@ impl<'a> App<'a> {
         }
         let out = self.commanded();
         board.set_pressures(&out[..self.actuators()]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use crate::kinematics::inverse;
+    use ocm_shared::protocol::{LUT_CHUNK, Load};
+    use std::vec;
+
+    fn send(app: &mut App<'_>, body: CommandBody) -> ReplyBody {
+        app.handle(&Command { seq: 1, body }, 0).body
+    }
+
+    /// A new moment target is looked up in the bending map by `handle`, at
+    /// the mean pressure of its own inverse solution: the ticks that follow
+    /// find it in the memo and leave the memo as it was.
+    #[test]
+    fn moment_target_primes_the_bending_memo_for_the_ticks() {
+        let mut img = vec![0u8; 32 * 1024];
+        let n = crate::bringup::write_image(&DEFAULT_GEOMETRY.ocm, &mut img).unwrap_or(0);
+        img.truncate(n);
+        let mut buf = vec![0u8; 32 * 1024];
+        let mut app = App::new(&mut buf, AppConfig::default());
+        let crc32 = LUT_CRC.checksum(&img);
+        let total_len = img.len() as u32;
+        send(&mut app, CommandBody::LutBegin { total_len, crc32 });
+        for (k, c) in img.chunks(LUT_CHUNK).enumerate() {
+            let data = Vec::from_slice(c).unwrap_or_default();
+            let offset = (k * LUT_CHUNK) as u32;
+            send(&mut app, CommandBody::LutChunk { offset, data });
+        }
+        assert!(matches!(
+            send(&mut app, CommandBody::LutCommit),
+            ReplyBody::LutLoaded { .. }
+        ));
+        let mut configs = Vec::new();
+        let _ = configs.push(SegmentConfig {
+            backbone_q24: 2_100_000,
+            bend_q28: 80_000_000,
+            direction_q28: 100_000_000,
+        });
+        let load = Load {
+            payload_kg: 0.1,
+            moment_x_newton_m: 0.01,
+            moment_y_newton_m: -0.005,
+            ..Load::default()
+        };
+        let target = Target {
+            kind: TargetKind::Configuration(configs.clone()),
+            load,
+        };
+        assert_eq!(
+            send(&mut app, CommandBody::SetTarget(target)),
+            ReplyBody::Ack
+        );
+        assert_eq!(
+            send(&mut app, CommandBody::SetMode(Mode::OpenLoop)),
+            ReplyBody::Ack
+        );
+
+        let fx = LoadFx::new(&load, &app.model).unwrap_or_default();
+        let lut = app.lut().copied();
+        let sol = lut.and_then(|l| {
+            inverse(
+                &l,
+                &app.model,
+                &fx,
+                &configs,
+                app.limits.min_q8,
+                app.limits.max_q8,
+            )
+        });
+        let want = sol.as_ref().map(segment_means);
+        let held = app.target.as_ref().map(|t| t.bend_p_q8);
+        assert!(want.is_some());
+        assert_eq!(held, want);
+
+        let primed = app.bend_memo.get();
+        assert!(primed.iter().any(Option::is_some), "handle primed nothing");
+        for k in 0..20i16 {
+            let frame = SensorFrame {
+                hall_codes: Vec::from_slice(&[10_000 + k, 10_500, 11_000]).unwrap_or_default(),
+                imu_quat_q14: [16_384, 0, 0, 0],
+                pressures_pa: Vec::from_slice(&[5_000, 6_000, 7_000]).unwrap_or_default(),
+            };
+            let r = send(&mut app, CommandBody::SensorFrame(frame));
+            assert!(
+                matches!(r, ReplyBody::Telemetry(ref t) if t.faults == 0),
+                "{r:?}"
+            );
+            assert_eq!(app.bend_memo.get(), primed, "tick {k} missed the memo");
+        }
     }
 }

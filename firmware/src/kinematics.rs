@@ -26,6 +26,7 @@ use crate::fx::{
     PI_Q28, Q30_ONE, atan2_q28, div_round, hypot, mul_shr, rshift_round, sat, sin_cos_q28, sinc_q30,
 };
 use crate::maps::OcmMaps;
+use ocm_shared::lut::udiv_u64_by_u32;
 
 /// Standard gravity, m/s^2.
 pub const GRAVITY: f64 = 9.806_65;
@@ -187,39 +188,96 @@ pub fn column_forces(model: &Model, load: &LoadFx, seg: usize) -> [i32; 3] {
     out
 }
 
+/// Magnitude and direction of a load's bending moment, computed once per
+/// load rather than on every use (a square root and a 64-bit division).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct MomentFx {
+    /// `|M|` (eq 3.30), N*m Q8.24; zero without a moment.
+    pub m_q24: i32,
+    /// `cos phi_M = M_y / |M|`, Q1.30.
+    pub cos_q30: i32,
+    /// `sin phi_M = -M_x / |M|`, Q1.30.
+    pub sin_q30: i32,
+}
+
+impl MomentFx {
+    /// The moment of `load`.
+    pub fn new(load: &LoadFx) -> Self {
+        let m = load.moment_q24();
+        // `m > 0` here; `2^52 + m/2 < 2^53` and `m < 2^31`, so the exact
+        // 64/32 division (hardware 32-bit divides) gives `round(2^52 / m)`.
+        let Some(inv_m) = u32::try_from(m)
+            .ok()
+            .filter(|&m| m > 0)
+            .and_then(|m32| udiv_u64_by_u32((1u64 << 52) + u64::from(m32 / 2), m32))
+        else {
+            return Self::default();
+        };
+        // |M_x|, |M_y| <= M bounds the products by 2^52.
+        let inv_m = inv_m as i64;
+        Self {
+            m_q24: m,
+            cos_q30: sat(rshift_round(
+                i64::from(load.my_q24).saturating_mul(inv_m),
+                22,
+            )),
+            sin_q30: sat(rshift_round(
+                -i64::from(load.mx_q24).saturating_mul(inv_m),
+                22,
+            )),
+        }
+    }
+}
+
+/// A [`LoadFx`] with its moment's magnitude and direction precomputed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PreparedLoad {
+    /// The load.
+    pub load: LoadFx,
+    /// Its moment.
+    pub moment: MomentFx,
+}
+
+impl PreparedLoad {
+    /// Precomputes the moment of `load`.
+    pub fn new(load: &LoadFx) -> Self {
+        Self {
+            load: *load,
+            moment: MomentFx::new(load),
+        }
+    }
+}
+
+/// Neutral-axis length of one OCM of a segment with backbone `c`, m Q8.24:
+/// the length the inverse map queries the bending map at.
+fn ocm_length_q24(model: &Model, c: &SegmentConfig) -> Option<i32> {
+    Some(sat(div_round(
+        i64::from(c.backbone_q24),
+        i64::from(model.ocms),
+    )?))
+}
+
 /// Column shortening `d theta_B cos(beta_i - phi_M)` caused by the moment's
 /// own bending of the OCMs (eq 3.31, 3.34), m Q8.24. Zero without a moment.
 fn moment_bending<M: OcmMaps>(
     maps: &M,
     model: &Model,
-    load: &LoadFx,
+    moment: &MomentFx,
     s_ocm_q24: i32,
     p_mean_q8: i32,
 ) -> Option<[i32; 3]> {
-    let m = load.moment_q24();
-    if m == 0 {
+    if moment.m_q24 == 0 {
         return Some([0; 3]);
     }
-    let phi_ocm_q16 = maps.bend(m, s_ocm_q24, p_mean_q8)?;
+    let phi_ocm_q16 = maps.bend(moment.m_q24, s_ocm_q24, p_mean_q8)?;
     let theta_q28 = sat((i64::from(phi_ocm_q16) * i64::from(model.ocms)) << 12);
     let d_theta_q24 = mul_shr(model.d_q24, theta_q28, 28);
-    // cos(beta_i - phi_M) with (cos phi_M, sin phi_M) = (M_y, -M_x) / M:
-    // one reciprocal for both components (|M_x|, |M_y| <= M bounds the
-    // products by 2^52).
-    let inv_m = div_round(1i64 << 52, i64::from(m))?;
-    let dir_x = sat(rshift_round(
-        i64::from(load.my_q24).saturating_mul(inv_m),
-        22,
-    ));
-    let dir_y = sat(rshift_round(
-        -i64::from(load.mx_q24).saturating_mul(inv_m),
-        22,
-    ));
     let mut out = [0; 3];
     for (i, o) in out.iter_mut().enumerate() {
+        // cos(beta_i - phi_M).
         let c_q30 = rshift_round(
-            i64::from(dir_x) * i64::from(COS_BETA_Q30[i])
-                + i64::from(dir_y) * i64::from(SIN_BETA_Q30[i]),
+            i64::from(moment.cos_q30) * i64::from(COS_BETA_Q30[i])
+                + i64::from(moment.sin_q30) * i64::from(SIN_BETA_Q30[i]),
             30,
         );
         *o = mul_shr(d_theta_q24, sat(c_q30), 30);
@@ -236,6 +294,18 @@ pub fn column_lengths<M: OcmMaps>(
     seg: usize,
     p_q8: [i32; 3],
 ) -> Option<[i32; 3]> {
+    column_lengths_prepared(maps, model, &PreparedLoad::new(load), seg, p_q8)
+}
+
+/// [`column_lengths`] of a [`PreparedLoad`].
+pub fn column_lengths_prepared<M: OcmMaps>(
+    maps: &M,
+    model: &Model,
+    prepared: &PreparedLoad,
+    seg: usize,
+    p_q8: [i32; 3],
+) -> Option<[i32; 3]> {
+    let load = &prepared.load;
     let forces = column_forces(model, load, seg);
     let mut eps = [0i32; 3];
     for i in 0..3 {
@@ -247,7 +317,7 @@ pub fn column_lengths<M: OcmMaps>(
         16,
     ));
     let p_mean = sat((i64::from(p_q8[0]) + i64::from(p_q8[1]) + i64::from(p_q8[2])) / 3);
-    let bend = moment_bending(maps, model, load, s_ocm, p_mean)?;
+    let bend = moment_bending(maps, model, &prepared.moment, s_ocm, p_mean)?;
     let mut l = [0i32; 3];
     for i in 0..3 {
         let axial = rshift_round(
@@ -456,10 +526,20 @@ pub fn forward<M: OcmMaps>(
     load: &LoadFx,
     p_q8: &[i32],
 ) -> Option<Vec<SegmentConfig, MAX_SEGMENTS>> {
+    forward_prepared(maps, model, &PreparedLoad::new(load), p_q8)
+}
+
+/// [`forward`] under a [`PreparedLoad`].
+pub fn forward_prepared<M: OcmMaps>(
+    maps: &M,
+    model: &Model,
+    load: &PreparedLoad,
+    p_q8: &[i32],
+) -> Option<Vec<SegmentConfig, MAX_SEGMENTS>> {
     let mut out = Vec::new();
     for seg in 0..model.segments {
         let p = p_q8.get(3 * seg..3 * seg + 3)?;
-        let l = column_lengths(maps, model, load, seg, [p[0], p[1], p[2]])?;
+        let l = column_lengths_prepared(maps, model, load, seg, [p[0], p[1], p[2]])?;
         out.push(pcc_from_lengths(model, l)).ok()?;
     }
     Some(out)
@@ -504,7 +584,8 @@ pub fn inverse<M: OcmMaps>(
 }
 
 /// [`inverse`] with the bending map evaluated at a known mean pressure per
-/// segment (a controller passes its last commands), in a single pass.
+/// segment (the app passes the mean of the target's own solution), in a
+/// single pass.
 pub fn inverse_with_hint<M: OcmMaps>(
     maps: &M,
     model: &Model,
@@ -514,6 +595,28 @@ pub fn inverse_with_hint<M: OcmMaps>(
     p_hi_q8: i32,
     p_mean_hint_q8: Option<&[i32]>,
 ) -> Option<InverseSolution> {
+    inverse_prepared(
+        maps,
+        model,
+        &PreparedLoad::new(load),
+        target,
+        (p_lo_q8, p_hi_q8),
+        p_mean_hint_q8,
+    )
+}
+
+/// [`inverse_with_hint`] under a [`PreparedLoad`], pressure limits
+/// `(lo, hi)` Pa Q24.8: what a control tick calls, with the moment's square
+/// root and division done once per load.
+pub fn inverse_prepared<M: OcmMaps>(
+    maps: &M,
+    model: &Model,
+    prepared: &PreparedLoad,
+    target: &[SegmentConfig],
+    (p_lo_q8, p_hi_q8): (i32, i32),
+    p_mean_hint_q8: Option<&[i32]>,
+) -> Option<InverseSolution> {
+    let load = &prepared.load;
     if target.len() != model.segments {
         return None;
     }
@@ -522,14 +625,14 @@ pub fn inverse_with_hint<M: OcmMaps>(
         saturated: false,
         lengths_q24: Vec::new(),
     };
-    let moment = load.moment_q24();
+    let moment = prepared.moment.m_q24;
     for (seg, c) in target.iter().enumerate() {
         let l_target = lengths_from_pcc(model, c);
         for &l in &l_target {
             out.lengths_q24.push(l).ok()?;
         }
         let forces = column_forces(model, load, seg);
-        let s_ocm = sat(div_round(i64::from(c.backbone_q24), i64::from(model.ocms))?);
+        let s_ocm = ocm_length_q24(model, c)?;
         let hint = p_mean_hint_q8.and_then(|h| h.get(seg).copied());
         let (mut p_mean, passes) = match hint {
             _ if moment == 0 => (0, 1),
@@ -538,7 +641,7 @@ pub fn inverse_with_hint<M: OcmMaps>(
         };
         let mut p = [0i32; 3];
         for _ in 0..passes {
-            let bend = moment_bending(maps, model, load, s_ocm, p_mean)?;
+            let bend = moment_bending(maps, model, &prepared.moment, s_ocm, p_mean)?;
             for i in 0..3 {
                 let axial = i64::from(l_target[i]) + i64::from(bend[i]);
                 let eps = (axial.saturating_mul(model.inv_column_k) >> 32) - 65_536;
@@ -554,6 +657,27 @@ pub fn inverse_with_hint<M: OcmMaps>(
         }
     }
     Some(out)
+}
+
+/// Queries the bending map exactly as [`inverse_prepared`] would with the
+/// hint `p_mean_hint_q8`, so that a memoizing `maps` (see
+/// [`crate::maps::MemoBend`]) answers the next control tick from memory.
+/// Does nothing without a moment.
+pub fn prime_bending<M: OcmMaps>(
+    maps: &M,
+    model: &Model,
+    prepared: &PreparedLoad,
+    target: &[SegmentConfig],
+    p_mean_hint_q8: &[i32],
+) {
+    if prepared.moment.m_q24 == 0 {
+        return;
+    }
+    for (c, &p_mean) in target.iter().zip(p_mean_hint_q8).take(model.segments) {
+        if let Some(s_ocm) = ocm_length_q24(model, c) {
+            let _ = maps.bend(prepared.moment.m_q24, s_ocm, p_mean);
+        }
+    }
 }
 
 /// Configurations that put the tip at `p` with all segments bent alike
@@ -583,4 +707,96 @@ pub fn configs_for_tip(model: &Model, p_q24: [i32; 3]) -> Option<Vec<SegmentConf
         .ok()?;
     }
     Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::maps::{LinearOcm, MemoBend};
+    use core::cell::Cell;
+    use proptest::prelude::*;
+
+    /// Counts the bending queries that reach the maps.
+    struct Counting {
+        inner: LinearOcm,
+        bends: Cell<u32>,
+    }
+
+    impl OcmMaps for Counting {
+        fn strain(&self, force_q16: i32, pressure_q8: i32) -> Option<i32> {
+            self.inner.strain(force_q16, pressure_q8)
+        }
+        fn force(&self, strain_q16: i32, pressure_q8: i32) -> Option<i32> {
+            self.inner.force(strain_q16, pressure_q8)
+        }
+        fn bend(&self, moment_q24: i32, s_q24: i32, pressure_q8: i32) -> Option<i32> {
+            self.bends.set(self.bends.get() + 1);
+            self.inner.bend(moment_q24, s_q24, pressure_q8)
+        }
+    }
+
+    proptest! {
+        /// The 64/32 reciprocal equals the 64-bit library division it
+        /// replaced, and the direction is a unit vector along (M_y, -M_x).
+        #[test]
+        fn moment_direction_matches_the_64_bit_division(
+            mx in -(20i32 << 24)..=(20 << 24),
+            my in -(20i32 << 24)..=(20 << 24),
+        ) {
+            let load = LoadFx { fz_q16: 0, mx_q24: mx, my_q24: my };
+            let mo = MomentFx::new(&load);
+            prop_assert_eq!(mo.m_q24, load.moment_q24());
+            if mo.m_q24 == 0 {
+                prop_assert_eq!(mo, MomentFx::default());
+            } else {
+                let inv = div_round(1i64 << 52, i64::from(mo.m_q24)).unwrap_or(0);
+                prop_assert_eq!(mo.cos_q30, sat(rshift_round(i64::from(my) * inv, 22)));
+                prop_assert_eq!(mo.sin_q30, sat(rshift_round(-i64::from(mx) * inv, 22)));
+                let angle = f64::atan2(-f64::from(mx), f64::from(my));
+                let one = f64::from(Q30_ONE);
+                prop_assert!((f64::from(mo.cos_q30) / one - angle.cos()).abs() < 1e-6);
+                prop_assert!((f64::from(mo.sin_q30) / one - angle.sin()).abs() < 1e-6);
+            }
+        }
+    }
+
+    /// After `prime_bending`, the hinted inverse finds every bending query
+    /// in the memo, and the memo changes none of its results.
+    #[test]
+    fn primed_memo_answers_every_bending_query_of_the_inverse() {
+        let maps = Counting {
+            inner: LinearOcm::SOFT,
+            bends: Cell::new(0),
+        };
+        let model = Model::convert(&crate::app::DEFAULT_GEOMETRY);
+        let load = PreparedLoad::new(&LoadFx {
+            fz_q16: -65_536,
+            mx_q24: 1 << 20,
+            my_q24: -(1 << 19),
+        });
+        let target = [SegmentConfig {
+            backbone_q24: 2_100_000,
+            bend_q28: 80_000_000,
+            direction_q28: 100_000_000,
+        }];
+        let limits = (0, 35_000 << 8);
+        let hint = [12_345 << 8];
+        let plain = inverse_prepared(&maps, &model, &load, &target, limits, Some(&hint));
+        assert!(plain.is_some());
+        let cache = Cell::new([None; 3]);
+        let memo = MemoBend::new(&maps, &cache);
+        let unprimed = maps.bends.get();
+        prime_bending(&memo, &model, &load, &target, &hint);
+        let primed = maps.bends.get();
+        assert_eq!(primed, unprimed + 1, "priming made no bending query");
+        let memoized = inverse_prepared(&memo, &model, &load, &target, limits, Some(&hint));
+        assert_eq!(maps.bends.get(), primed, "the tick missed the primed memo");
+        assert_eq!(memoized, plain);
+        // Without a moment, neither priming nor the inverse query the map.
+        let calm = PreparedLoad::new(&LoadFx::default());
+        let before = maps.bends.get();
+        prime_bending(&memo, &model, &calm, &target, &hint);
+        let _ = inverse_prepared(&memo, &model, &calm, &target, limits, Some(&hint));
+        assert_eq!(maps.bends.get(), before);
+    }
 }

@@ -38,6 +38,29 @@ pub struct StepReport {
     pub substeps: usize,
     /// Final residual, N.
     pub residual: f64,
+    /// Factorizations of the iteration matrix (modified Newton reuses one while it converges fast).
+    pub factorizations: usize,
+}
+
+/// Residual ratio per iteration above which the iteration matrix is refreshed at the current point.
+const SLOW_CONTRACTION: f64 = 0.5;
+
+/// Factorizes J = ca M + cv D + K into `linear`.
+fn factorize_jacobian(
+    linear: &mut SparseSolver,
+    mass: &[f64],
+    k: &[f64],
+    ca: f64,
+    cv: f64,
+    damp: &[f64],
+) -> Result<()> {
+    let jac: Vec<f64> = k
+        .iter()
+        .zip(mass)
+        .zip(damp)
+        .map(|((k, m), d)| ca * m + cv * d + k)
+        .collect();
+    linear.factorize(&jac)
 }
 
 /// Dynamic solver with cached structure, mass and symbolic factorization.
@@ -52,8 +75,9 @@ pub struct DynamicSolver {
     /// Newton controls.
     pub options: NewtonOptions,
     initialized: bool,
-    /// Tangent at the end of the last step (positions, pressures, values): the next step's damping.
-    cached_tangent: Option<(Vec<f64>, Vec<f64>, Vec<f64>)>,
+    /// (ca, cv) of the iteration matrix whose factor `linear` holds, if any: later steps of the
+    /// same size start their modified Newton from it.
+    factor_coeffs: Option<(f64, f64)>,
 }
 
 impl DynamicSolver {
@@ -80,7 +104,7 @@ impl DynamicSolver {
             integrator,
             options: NewtonOptions::default(),
             initialized: false,
-            cached_tangent: None,
+            factor_coeffs: None,
         })
     }
 
@@ -115,7 +139,11 @@ impl DynamicSolver {
         while remaining > 1e-15 * dt {
             h = h.min(remaining);
             let saved = state.clone();
-            match self.substep(model, state, loads, h, &mut rep) {
+            let result = self.substep(model, state, loads, h, &mut rep);
+            if result.is_err() {
+                self.factor_coeffs = None;
+            }
+            match result {
                 Ok(()) => {
                     remaining -= h;
                     rep.substeps += 1;
@@ -168,6 +196,7 @@ impl DynamicSolver {
             })
             .collect();
         let m = self.mass.clone();
+        self.factor_coeffs = None;
         self.linear.solve(&m, &mut rhs)?;
         state.a = vec![0.0; state.x.len()];
         for (j, &d) in self.pattern.dof_of.iter().enumerate() {
@@ -202,13 +231,10 @@ impl DynamicSolver {
             }
         };
         // Rayleigh damping with the stiffness frozen at the start of the step.
-        let k_n = match self.cached_tangent.take() {
-            Some((cx, cp, k)) if cx == xn && cp == loads.pressures_pa => k,
-            _ => model
-                .evaluate(&self.pattern, &xn, loads, 1.0, true)?
-                .tangent
-                .ok_or_else(|| FemError::Linear("tangent missing".into()))?,
-        };
+        let k_n = model
+            .evaluate(&self.pattern, &xn, loads, 1.0, true)?
+            .tangent
+            .ok_or_else(|| FemError::Linear("tangent missing".into()))?;
         let damp: Vec<f64> = self
             .mass
             .iter()
@@ -246,25 +272,32 @@ impl DynamicSolver {
         for &d in &self.pattern.dof_of {
             x[d] += h * vn[d];
         }
-        let mut ev = model.evaluate(&self.pattern, &x, loads, 1.0, true)?;
+        // Modified Newton: the iteration matrix J = ca M + cv D + K is factorized with the tangent
+        // at the step start (already needed for the damping) and reused while it contracts the
+        // residual fast enough; it is refreshed at the current point when the contraction slows
+        // or the line search stalls. The convergence test is that of full Newton, so the solution
+        // is the same to within the tolerance, and trial points need no tangent.
+        let ev = model.evaluate(&self.pattern, &x, loads, 1.0, false)?;
         let (mut r, mut scale) = residual(&ev, &x);
         let mut rn = norm(&r);
         let mut converged = false;
+        // None: no factor yet; Some(fresh): a factor exists, fresh when from the current point.
+        // The last step's factor (same h) is as good a start as one from K_n and costs nothing.
+        let mut factor: Option<bool> = (self.factor_coeffs == Some((ca, cv))).then_some(false);
+        self.factor_coeffs = None;
         for _ in 0..opts.max_iterations {
             if rn <= opts.rtol * scale || rn == 0.0 {
                 converged = true;
                 break;
             }
             rep.iterations += 1;
-            let k = ev
-                .tangent
-                .as_ref()
-                .ok_or_else(|| FemError::Linear("tangent missing".into()))?;
-            let jac: Vec<f64> = (0..k.len())
-                .map(|i| ca * self.mass[i] + cv * damp[i] + k[i])
-                .collect();
+            if factor.is_none() {
+                factorize_jacobian(&mut self.linear, &self.mass, &k_n, ca, cv, &damp)?;
+                rep.factorizations += 1;
+                factor = Some(false);
+            }
             let mut dx: Vec<f64> = r.iter().map(|v| -v).collect();
-            self.linear.solve(&jac, &mut dx)?;
+            self.linear.solve_factored(&mut dx)?;
             let pattern = &self.pattern;
             let x0 = x.clone();
             let found = super::line_search(
@@ -273,32 +306,48 @@ impl DynamicSolver {
                     for (j, &d) in pattern.dof_of.iter().enumerate() {
                         xt[d] += alpha * dx[j];
                     }
-                    let evt = model.evaluate(pattern, &xt, loads, 1.0, alpha == 1.0)?;
+                    let evt = model.evaluate(pattern, &xt, loads, 1.0, false)?;
                     let (r, scale) = residual(&evt, &xt);
-                    Ok(super::Trial {
-                        r,
-                        scale,
-                        data: (xt, evt),
-                    })
+                    Ok(super::Trial { r, scale, data: xt })
                 },
                 &dx,
                 &r,
                 opts.max_backtracks,
             )?;
-            let Some((alpha, t)) = found else { break };
-            let (xt, evt) = t.data;
-            ev = if evt.tangent.is_some() {
-                evt
-            } else {
-                model.evaluate(&self.pattern, &xt, loads, 1.0, true)?
+            let Some((alpha, t)) = found else {
+                if factor == Some(true) {
+                    break;
+                }
+                // A stale matrix may point nowhere useful: retry from here with the exact tangent.
+                let k = model
+                    .evaluate(&self.pattern, &x, loads, 1.0, true)?
+                    .tangent
+                    .ok_or_else(|| FemError::Linear("tangent missing".into()))?;
+                factorize_jacobian(&mut self.linear, &self.mass, &k, ca, cv, &damp)?;
+                rep.factorizations += 1;
+                factor = Some(true);
+                continue;
             };
-            x = xt;
+            let rn_new = norm(&t.r);
+            x = t.data;
             r = t.r;
             scale = t.scale;
-            rn = norm(&r);
+            let slow = rn_new > SLOW_CONTRACTION * rn;
+            rn = rn_new;
             if alpha * norm(&dx) <= opts.dx_tol {
                 converged = true;
                 break;
+            }
+            if slow && rn > opts.rtol * scale {
+                let k = model
+                    .evaluate(&self.pattern, &x, loads, 1.0, true)?
+                    .tangent
+                    .ok_or_else(|| FemError::Linear("tangent missing".into()))?;
+                factorize_jacobian(&mut self.linear, &self.mass, &k, ca, cv, &damp)?;
+                rep.factorizations += 1;
+                factor = Some(true);
+            } else if factor == Some(true) {
+                factor = Some(false);
             }
         }
         if !converged && rn > opts.stall_rtol * scale {
@@ -309,6 +358,9 @@ impl DynamicSolver {
                 step: h,
             });
         }
+        if factor.is_some() {
+            self.factor_coeffs = Some((ca, cv));
+        }
         rep.residual = rn;
         let mut v = vec![0.0; x.len()];
         let mut a = vec![0.0; x.len()];
@@ -317,13 +369,90 @@ impl DynamicSolver {
             a[d] = ad;
             v[d] = vd;
         }
-        if let Some(k) = ev.tangent.take() {
-            self.cached_tangent = Some((x.clone(), loads.pressures_pa.clone(), k));
-        }
         state.x = x;
         state.v = v;
         state.a = a;
         state.t += h;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::material::Material;
+    use crate::mesh::generate;
+    use nalgebra::Vector3;
+
+    /// Each modified-Newton step ends on the implicit Euler equations, recomputed here from the
+    /// model alone: M a + (alpha M + beta K(x_n)) v + f_int(x) = f_ext(x), a = (x - x_n)/h^2 - v_n/h,
+    /// v = (x - x_n)/h; and the factorization is reused across iterations and steps.
+    #[test]
+    fn modified_newton_steps_satisfy_the_implicit_euler_equations() {
+        let mesh = generate::box_mesh([6, 2, 2], [0.1, 0.02, 0.02]);
+        let mut model = Model::new(&mesh, Material::neo_hookean_bulk(2e5, 0.4), 1040.0).unwrap();
+        model.gravity = Vector3::new(0.0, 0.0, -9.81);
+        model.fix_plane([0.0; 3], [1.0, 0.0, 0.0], 1e-9);
+        model.rayleigh_alpha = 2.0;
+        model.rayleigh_beta = 0.005;
+        let mut solver = DynamicSolver::new(&model, Integrator::ImplicitEuler).unwrap();
+        let pat = Pattern::new(&model).unwrap();
+        let loads = Loads::default();
+        let h = 0.01;
+        let mut s = State::at_rest(&model);
+        let (mut iterations, mut factorizations) = (0, 0);
+        for _ in 0..8 {
+            let (xn, vn) = (s.x.clone(), s.v.clone());
+            let rep = solver.step(&model, &mut s, &loads, h).unwrap();
+            assert_eq!(rep.substeps, 1);
+            iterations += rep.iterations;
+            factorizations += rep.factorizations;
+            let k_n = model
+                .evaluate(&pat, &xn, &loads, 1.0, true)
+                .unwrap()
+                .tangent
+                .unwrap();
+            let ev = model.evaluate(&pat, &s.x, &loads, 1.0, false).unwrap();
+            let a: Vec<f64> = (0..xn.len())
+                .map(|d| (s.x[d] - xn[d]) / (h * h) - vn[d] / h)
+                .collect();
+            let ma = model.mass_times(&a);
+            let v_free: Vec<f64> = pat.dof_of.iter().map(|&d| (s.x[d] - xn[d]) / h).collect();
+            let kv = spmv(&pat, &k_n, &v_free);
+            let mv = model.mass_times(
+                &(0..xn.len())
+                    .map(|d| (s.x[d] - xn[d]) / h)
+                    .collect::<Vec<_>>(),
+            );
+            let r: Vec<f64> = pat
+                .dof_of
+                .iter()
+                .enumerate()
+                .map(|(j, &d)| {
+                    ma[d] + model.rayleigh_alpha * mv[d] + model.rayleigh_beta * kv[j] + ev.f_int[d]
+                        - ev.f_ext[d]
+                })
+                .collect();
+            let scale = norm(&ev.f_int).max(norm(&ev.f_ext)).max(norm(&ma));
+            assert!(
+                norm(&r) <= 2.0 * solver.options.rtol * scale,
+                "residual {} vs scale {scale}",
+                norm(&r)
+            );
+            for (d, &fixed) in model.fixed.iter().enumerate() {
+                if fixed {
+                    assert_eq!(s.x[d], xn[d]);
+                }
+            }
+        }
+        let tip = 3 * (model.num_nodes() - 1) + 2;
+        assert!(
+            s.x[tip] < model.rest[model.num_nodes() - 1].z - 1e-6,
+            "gravity must move the tip"
+        );
+        assert!(
+            factorizations < iterations,
+            "factorizations {factorizations} must be reused over {iterations} iterations"
+        );
     }
 }
