@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Every test of the project: formatting, lints, host tests of all crates
-# (unit, property, real-data and end-to-end), and the firmware cross-builds.
+# Every test of the project: formatting, lints, the firmware cross-builds
+# (flash/RAM budget and the QEMU instruction-count bench), and the host tests
+# of all crates (unit, property, real-data and end-to-end, QEMU included).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -11,10 +12,15 @@ cargo fmt --all -- --check
 echo "== cargo clippy"
 cargo clippy -q --workspace --all-targets -- -D warnings
 
-echo "== cargo test"
-cargo test --workspace
-
 if [ -x firmware/boards/build.sh ]; then
     echo "== firmware cross-builds"
     bash firmware/boards/build.sh
 fi
+
+echo "== cargo test"
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+cargo test --workspace 2>&1 | tee "$log"
+# One closing line with the totals over every test binary.
+awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i+1) ~ /^passed/) p += $i; if ($(i+1) ~ /^failed/) f += $i } }
+     END { printf "tests: %d passed, %d failed\n", p, f }' "$log"
