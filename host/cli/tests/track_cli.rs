@@ -74,3 +74,38 @@ fn unknown_scenario_is_named() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("zigzag") && err.contains("circle"), "{err}");
 }
+
+#[test]
+fn firmware_in_process_closes_the_loop() {
+    let r = track(&[
+        "--short",
+        "--scenario",
+        "circle",
+        "--mcu",
+        "inproc",
+        "--json",
+    ]);
+    let (ol, cl) = (
+        r["ol_rmse_mm"].as_f64().unwrap(),
+        r["cl_rmse_mm"].as_f64().unwrap(),
+    );
+    assert!(
+        cl < 0.5 * ol,
+        "firmware closed loop {cl} mm vs open loop {ol} mm"
+    );
+    let runs: Vec<&str> = r["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x["controller"].as_str().unwrap())
+        .collect();
+    assert!(
+        runs.contains(&"firmware_ol") && runs.contains(&"firmware_cl") && runs.contains(&"oracle"),
+        "{runs:?}"
+    );
+    for run in r["runs"].as_array().unwrap() {
+        if let Some(v) = run["figures"].get("limit_violations") {
+            assert_eq!(v.as_f64().unwrap(), 0.0, "pressure limits exceeded");
+        }
+    }
+}
