@@ -231,3 +231,42 @@ impl Mcu for FirmwareMcu<'_> {
         }
     }
 }
+
+/// Runs time-domain scenario `name` with the in-process firmware in open
+/// loop (`firmware_ol`) and closed loop (`firmware_cl`), beside the host
+/// oracle as the floor; `ol_rmse_mm` and `cl_rmse_mm` are the firmware's.
+pub fn run_scenario_with_firmware(
+    name: &str,
+    cfg: &crate::SimConfig,
+) -> Result<crate::ScenarioReport, SimError> {
+    let image = lut_image(&cfg.plant, &cfg.limits)?;
+    let mut runs = Vec::new();
+    for (closed, label) in [(false, "firmware_ol"), (true, "firmware_cl")] {
+        let mut buf = vec![0u8; LUT_CAPACITY];
+        let mut fw = FirmwareMcu::new(
+            &mut buf,
+            &image,
+            &cfg.plant,
+            &cfg.hall,
+            &cfg.gains,
+            &cfg.limits,
+            closed,
+        )?;
+        let mut run = crate::run_with_mcu(name, cfg, &mut fw)?;
+        run.controller = label.to_string();
+        runs.push(run);
+    }
+    let oracle_cfg = crate::SimConfig {
+        controllers: vec![crate::ControllerKind::Oracle],
+        ..cfg.clone()
+    };
+    let mut report = crate::run_scenario(name, &oracle_cfg)?;
+    report.ol_rmse_mm = Some(runs[0].rmse_mm);
+    report.cl_rmse_mm = Some(runs[1].rmse_mm);
+    let (sim, wall) = runs.iter().fold((0.0, 0.0), |(s, w), r| {
+        (s + r.sim_s, w + r.sim_s / r.realtime_factor.max(1e-12))
+    });
+    report.realtime_factor = if wall > 0.0 { sim / wall } else { 0.0 };
+    report.runs.extend(runs);
+    Ok(report)
+}

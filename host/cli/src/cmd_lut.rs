@@ -7,7 +7,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use ocm_lutgen::OcmModel;
 use ocm_lutgen::config::Config;
 use ocm_lutgen::tables::{build_tables, check_accuracy};
-use ocm_shared::lut::{LutError, LutImage};
+use ocm_shared::lut::{LengthM, LutError, LutImage};
 
 use crate::plot::{Chart, Series};
 
@@ -145,18 +145,6 @@ fn parse<'a>(bytes: &'a [u8], file: &Path) -> Result<LutImage<'a>> {
         .map_err(|e| anyhow::anyhow!("{}: invalid LUT image: {e:?}", file.display()))
 }
 
-/// Largest bending angle at length `s`, interpolated between the stored levels.
-fn phi_max_at(image: &LutImage, s: f64) -> f64 {
-    let g = image.bending_grid();
-    let (lo, hi): (f64, f64) = (g.s_min.to_num(), g.s_max.to_num());
-    let t = ((s - lo) / (hi - lo) * f64::from(g.n_s - 1)).clamp(0.0, f64::from(g.n_s - 1));
-    let k = (t.floor() as u16).min(g.n_s - 2);
-    let w = t - f64::from(k);
-    let a: f64 = image.phi_max_at(k).map_or(0.0, |v| v.to_num());
-    let b: f64 = image.phi_max_at(k + 1).map_or(0.0, |v| v.to_num());
-    a + w * (b - a)
-}
-
 fn plot(file: &Path, out: &Path) -> Result<()> {
     let bytes = read_image(file)?;
     let image = parse(&bytes, file)?;
@@ -197,7 +185,10 @@ fn plot(file: &Path, out: &Path) -> Result<()> {
     let mut bending = Vec::new();
     for k in 0..16 {
         let s = s0 + (s1 - s0) * f64::from(k) / 15.0;
-        let phi_max = phi_max_at(&image, s);
+        let phi_max: f64 = image
+            .max_bend_angle(LengthM::from_num(s))
+            .map_err(|e| anyhow::anyhow!("{e:?}"))?
+            .to_num();
         let points = (0..samples)
             .map(|i| {
                 let phi = phi_max * i as f64 / (samples - 1) as f64;

@@ -4,10 +4,8 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use ocm_hilsim::firmware::{FirmwareMcu, LUT_CAPACITY, lut_image};
-use ocm_hilsim::{
-    ControllerKind, SCENARIOS, ScenarioReport, SimConfig, run_scenario, run_with_mcu,
-};
+use ocm_hilsim::firmware::run_scenario_with_firmware;
+use ocm_hilsim::{SCENARIOS, SimConfig, run_scenario};
 
 /// Which controller sits in the loop as the MCU.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -42,41 +40,6 @@ pub struct TrackArgs {
     mcu: McuMode,
 }
 
-/// Runs a time-domain scenario with the in-process firmware in open and
-/// closed loop, and the host oracle as the floor.
-fn run_firmware(name: &str, cfg: &SimConfig) -> Result<ScenarioReport> {
-    let image = lut_image(&cfg.plant, &cfg.limits)?;
-    let mut runs = Vec::new();
-    for (closed, label) in [(false, "firmware_ol"), (true, "firmware_cl")] {
-        let mut buf = vec![0u8; LUT_CAPACITY];
-        let mut fw = FirmwareMcu::new(
-            &mut buf,
-            &image,
-            &cfg.plant,
-            &cfg.hall,
-            &cfg.gains,
-            &cfg.limits,
-            closed,
-        )?;
-        let mut run = run_with_mcu(name, cfg, &mut fw)?;
-        run.controller = label.to_string();
-        runs.push(run);
-    }
-    let oracle_cfg = SimConfig {
-        controllers: vec![ControllerKind::Oracle],
-        ..cfg.clone()
-    };
-    let mut report = run_scenario(name, &oracle_cfg)?;
-    report.ol_rmse_mm = Some(runs[0].rmse_mm);
-    report.cl_rmse_mm = Some(runs[1].rmse_mm);
-    let (sim, wall) = runs.iter().fold((0.0, 0.0), |(s, w), r| {
-        (s + r.sim_s, w + r.sim_s / r.realtime_factor.max(1e-12))
-    });
-    report.realtime_factor = if wall > 0.0 { sim / wall } else { 0.0 };
-    report.runs.extend(runs);
-    Ok(report)
-}
-
 /// Runs `ocm track`.
 pub fn run(args: TrackArgs) -> Result<()> {
     let names: Vec<&str> = if args.scenario == "all" {
@@ -108,7 +71,7 @@ pub fn run(args: TrackArgs) -> Result<()> {
     let mut all = Vec::new();
     for name in names {
         let report = if args.mcu == McuMode::Inproc && name != "rom" {
-            run_firmware(name, &cfg)
+            run_scenario_with_firmware(name, &cfg).map_err(anyhow::Error::from)
         } else {
             run_scenario(name, &cfg).map_err(anyhow::Error::from)
         }

@@ -242,6 +242,14 @@ impl LutImage<'_> {
         lerp(self.phi_max_raw(k), self.phi_max_raw(k + 1), w)
     }
 
+    /// Largest feasible bending angle at neutral-axis length `s`: the
+    /// stored `phi_max` levels interpolated in `s`, exactly as the bending
+    /// lookups bound their angles.
+    pub fn max_bend_angle(&self, s: LengthM) -> Result<AngleRad, LookupError> {
+        let (k, w) = self.length_cell(s)?;
+        Ok(AngleRad::from_bits(saturate_i32(self.phi_top(k, w))))
+    }
+
     /// Forward bending map `M(phi, s, P)`: at each of the two neighbouring
     /// length levels the moment at `u = |phi| / phi_max` is interpolated, then
     /// linearly in `s`; `M(-phi) = -M(phi)`. Angles past `phi_max(s)` (itself

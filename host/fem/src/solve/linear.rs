@@ -191,20 +191,26 @@ impl SparseSolver {
 mod tests {
     use super::*;
 
-    /// 1-D Laplacian (SPD) and an indefinite variant, against residual checks.
-    #[test]
-    fn solves_spd_and_indefinite() {
-        let n: usize = 50;
+    /// CSC pattern and values of the tridiagonal matrix `[-1, diag, -1]`.
+    fn tridiagonal(n: usize, diag: f64) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
         let mut cp = vec![0];
         let mut ri = vec![];
         let mut v = vec![];
         for j in 0..n {
             for i in j.saturating_sub(1)..(j + 2).min(n) {
                 ri.push(i);
-                v.push(if i == j { 2.0 } else { -1.0 });
+                v.push(if i == j { diag } else { -1.0 });
             }
             cp.push(ri.len());
         }
+        (cp, ri, v)
+    }
+
+    /// 1-D Laplacian (SPD) and an indefinite variant, against residual checks.
+    #[test]
+    fn solves_spd_and_indefinite() {
+        let n: usize = 50;
+        let (cp, ri, v) = tridiagonal(n, 2.0);
         let b: Vec<f64> = (0..n).map(|i| (i as f64).sin()).collect();
         let mut s = SparseSolver::new(n, cp.clone(), ri.clone());
         for shift in [0.0, -1.5] {
@@ -240,16 +246,7 @@ mod tests {
     #[test]
     fn factor_is_reused_across_right_hand_sides() {
         let n: usize = 30;
-        let mut cp = vec![0];
-        let mut ri = vec![];
-        let mut v = vec![];
-        for j in 0..n {
-            for i in j.saturating_sub(1)..(j + 2).min(n) {
-                ri.push(i);
-                v.push(if i == j { 2.5 } else { -1.0 });
-            }
-            cp.push(ri.len());
-        }
+        let (cp, ri, v) = tridiagonal(n, 2.5);
         let mut s = SparseSolver::new(n, cp.clone(), ri.clone());
         let mut x = vec![1.0; n];
         assert!(s.solve_factored(&mut x).is_err(), "no factor yet");
