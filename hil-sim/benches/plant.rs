@@ -76,17 +76,19 @@ fn bench(c: &mut Criterion) {
         // One short circle (13 simulated seconds) per iteration.
         group.bench_function("firmware_cl_circle_13s", |b| {
             b.iter(|| {
-                let mut fw = FirmwareMcu::new(
-                    &mut buf,
-                    &image,
-                    &cfg.plant,
-                    &cfg.hall,
-                    &cfg.gains,
-                    &cfg.limits,
-                    true,
-                )
-                .expect("firmware");
+                let mut fw =
+                    FirmwareMcu::in_process(&mut buf, &image, &cfg, true).expect("firmware");
                 run_with_mcu("circle", &cfg, &mut fw).expect("run").rmse_mm
+            })
+        });
+        // The lab's own unit of work on 2 cores: firmware OL and CL (26
+        // simulated seconds in all) on two threads, the oracle beside them,
+        // LUT build included.
+        group.bench_function("firmware_ol_cl_oracle_circle_2x13s", |b| {
+            b.iter(|| {
+                ocm_hilsim::firmware::run_scenario_with_firmware("circle", &cfg)
+                    .expect("run")
+                    .realtime_factor
             })
         });
         group.finish();

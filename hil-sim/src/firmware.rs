@@ -1,7 +1,8 @@
-//! The firmware linked in-process as an [`Mcu`] (issue mode a): the same
-//! `ocm_firmware::app::App` a board runs, driven through the wire
-//! protocol's messages (`Command` in, `Reply` out) without the byte
-//! framing, one `SensorFrame` per control tick.
+//! The firmware as an [`Mcu`]: the same command stream drives the
+//! `ocm_firmware::app::App` linked in-process ([`InProcess`], mode a), a
+//! board binary under QEMU or a real board on a serial port
+//! ([`crate::serial::SerialLink`], modes b and c). One `SensorFrame` per
+//! control tick; the `Telemetry` reply carries the commanded pressures.
 //!
 //! Setup mirrors what a host does over a serial port: geometry, LUT upload
 //! in chunks with its CRC-32, limits and gains, one Hall calibration per
@@ -16,11 +17,12 @@ use ocm_lutgen::OcmModel;
 use ocm_lutgen::tables::{TableConfig, build_tables};
 use ocm_shared::protocol::{
     CalPoint, Calibration, Command, CommandBody, Gains, Geometry, LUT_CHUNK, Limits, Load, Mode,
-    Mount, Reply, ReplyBody, SegmentConfig, SensorFrame, Target, TargetKind,
+    Mount, Reply, ReplyBody, SafeAction, SafetyConfig, SegmentConfig, SensorFrame, Target,
+    TargetKind,
 };
 
 use crate::SimError;
-use crate::mcu::{Mcu, McuInput, PidGains, PressureLimits};
+use crate::mcu::{Mcu, McuInput, PressureLimits};
 use crate::pcc::Config;
 use crate::plant::{Mounting, PlantParams};
 use crate::sensors::HallParams;
@@ -28,9 +30,55 @@ use crate::sensors::HallParams;
 /// LUT buffer size the boards reserve, bytes.
 pub const LUT_CAPACITY: usize = 32 * 1024;
 
-/// The firmware app as a controller under test.
-pub struct FirmwareMcu<'a> {
+/// One request-reply exchange with a firmware instance.
+pub trait Link {
+    /// Sends `cmd` and returns the firmware's reply to it; `now_us` is the
+    /// simulated time (an in-process app has no clock of its own).
+    fn exchange(&mut self, cmd: &Command, now_us: u32) -> Result<Reply, SimError>;
+
+    /// Sends `cmds` and returns their replies in order. A byte link sends
+    /// them back to back before it waits, paying the link's latency once.
+    fn exchange_all(&mut self, cmds: &[Command], now_us: u32) -> Result<Vec<Reply>, SimError> {
+        cmds.iter().map(|c| self.exchange(c, now_us)).collect()
+    }
+}
+
+/// The firmware app linked into this process: commands go straight to
+/// `App::handle`, without the byte framing.
+pub struct InProcess<'a> {
     app: App<'a>,
+}
+
+impl<'a> InProcess<'a> {
+    /// A fresh app keeping its LUT in `lut_buf`, ticking every `period_us`.
+    pub fn new(lut_buf: &'a mut [u8], period_us: u32) -> Self {
+        let config = AppConfig {
+            control_period_us: period_us,
+            ..AppConfig::default()
+        };
+        Self {
+            app: App::new(lut_buf, config),
+        }
+    }
+}
+
+impl Link for InProcess<'_> {
+    fn exchange(&mut self, cmd: &Command, now_us: u32) -> Result<Reply, SimError> {
+        Ok(self.app.handle(cmd, now_us))
+    }
+}
+
+/// Safety settings the lab sends: a link timeout loose enough for a slow
+/// host (a PIL run in a debug build), the default stuck-sensor check.
+const LAB_SAFETY: SafetyConfig = SafetyConfig {
+    link_timeout_us: 1_000_000,
+    action: SafeAction::Hold,
+    stuck_ticks: 200,
+};
+
+/// The firmware as a controller under test, over any [`Link`].
+pub struct FirmwareMcu<L: Link> {
+    link: L,
     seq: u16,
     now_us: u32,
     period_us: u32,
@@ -61,26 +109,34 @@ pub fn lut_image(plant: &PlantParams, limits: &PressureLimits) -> Result<Vec<u8>
         .map_err(|e| SimError::Config(e.to_string()))
 }
 
-impl<'a> FirmwareMcu<'a> {
-    /// Boots the app in `lut_buf`, uploads `image` and configures it;
-    /// `closed_loop` picks the mode entered at the first tick.
-    #[allow(clippy::too_many_arguments)]
-    pub fn new(
+impl<'a> FirmwareMcu<InProcess<'a>> {
+    /// The in-process firmware keeping its LUT in `lut_buf`, set up as
+    /// [`FirmwareMcu::new`] does.
+    pub fn in_process(
         lut_buf: &'a mut [u8],
         image: &[u8],
-        plant: &PlantParams,
-        hall: &HallParams,
-        gains: &PidGains,
-        limits: &PressureLimits,
+        cfg: &crate::SimConfig,
         closed_loop: bool,
     ) -> Result<Self, SimError> {
+        let period_us = (cfg.plant.dt_s * 1e6).round() as u32;
+        Self::new(InProcess::new(lut_buf, period_us), image, cfg, closed_loop)
+    }
+}
+
+impl<L: Link> FirmwareMcu<L> {
+    /// Configures the firmware behind `link` for `cfg`'s plant: geometry,
+    /// LUT `image` upload, limits, gains, safety and Hall calibrations;
+    /// `closed_loop` picks the mode entered at the first tick.
+    pub fn new(
+        link: L,
+        image: &[u8],
+        cfg: &crate::SimConfig,
+        closed_loop: bool,
+    ) -> Result<Self, SimError> {
+        let (plant, hall, gains, limits) = (&cfg.plant, &cfg.hall, &cfg.gains, &cfg.limits);
         let period_us = (plant.dt_s * 1e6).round() as u32;
-        let config = AppConfig {
-            control_period_us: period_us,
-            ..AppConfig::default()
-        };
         let mut me = Self {
-            app: App::new(lut_buf, config),
+            link,
             seq: 0,
             now_us: 0,
             period_us,
@@ -98,6 +154,20 @@ impl<'a> FirmwareMcu<'a> {
             }
             .to_string(),
         };
+        // A board may still run an earlier session: stop it, clear its
+        // latched faults and check it ticks at the plant's rate.
+        match me.expect_ok(CommandBody::GetInfo)? {
+            ReplyBody::Info(info) if info.control_period_us == period_us => {}
+            ReplyBody::Info(info) => {
+                return Err(SimError::Config(format!(
+                    "the firmware ticks every {} us but the plant steps every {} us (plant.dt_s)",
+                    info.control_period_us, period_us
+                )));
+            }
+            other => return Err(me.unexpected(&other)),
+        }
+        me.expect_ack(CommandBody::SetMode(Mode::Idle))?;
+        me.expect_ack(CommandBody::ClearFaults)?;
         let mount = match plant.mounting {
             Mounting::Upright => Mount::Upright,
             Mounting::Hanging => Mount::Hanging,
@@ -132,6 +202,7 @@ impl<'a> FirmwareMcu<'a> {
             ki_pa_per_m_s: gains.ki_pa_per_m_s as f32,
             derivative_filter_s: gains.filter_s as f32,
         }))?;
+        me.expect_ack(CommandBody::SetSafety(LAB_SAFETY))?;
         let ocms = f64::from(plant.manipulator.ocms_per_column);
         let col = ocms * plant.ocm.rest_length_m;
         for actuator in 0..3u8 {
@@ -149,22 +220,48 @@ impl<'a> FirmwareMcu<'a> {
         Ok(me)
     }
 
-    fn send(&mut self, body: CommandBody) -> Reply {
+    fn send(&mut self, body: CommandBody) -> Result<Reply, SimError> {
         self.seq = self.seq.wrapping_add(1);
-        self.app.handle(
-            &Command {
-                seq: self.seq,
-                body,
-            },
-            self.now_us,
-        )
+        let cmd = Command {
+            seq: self.seq,
+            body,
+        };
+        let reply = self.link.exchange(&cmd, self.now_us)?;
+        if reply.seq != cmd.seq {
+            return Err(SimError::Mcu {
+                name: self.name.clone(),
+                message: format!(
+                    "reply to command {} answers command {}: {:?}",
+                    cmd.seq, reply.seq, reply.body
+                ),
+            });
+        }
+        Ok(reply)
+    }
+
+    fn unexpected(&self, body: &ReplyBody) -> SimError {
+        SimError::Mcu {
+            name: self.name.clone(),
+            message: format!("unexpected reply {body:?}"),
+        }
+    }
+
+    fn unexpected_count(&self, sent: usize, got: usize) -> SimError {
+        SimError::Mcu {
+            name: self.name.clone(),
+            message: format!("{got} replies to {sent} commands"),
+        }
     }
 
     fn expect_ok(&mut self, body: CommandBody) -> Result<ReplyBody, SimError> {
-        match self.send(body).body {
+        let what = format!("{body:?}");
+        match self.send(body)?.body {
             ReplyBody::Error(e) => Err(SimError::Mcu {
-                name: "firmware".into(),
-                message: format!("{e:?}"),
+                name: self.name.clone(),
+                message: format!(
+                    "{e:?} in reply to {}",
+                    what.chars().take(60).collect::<String>()
+                ),
             }),
             other => Ok(other),
         }
@@ -175,7 +272,7 @@ impl<'a> FirmwareMcu<'a> {
     }
 }
 
-impl Mcu for FirmwareMcu<'_> {
+impl<L: Link> Mcu for FirmwareMcu<L> {
     fn name(&self) -> &str {
         &self.name
     }
@@ -194,16 +291,22 @@ impl Mcu for FirmwareMcu<'_> {
             moment_x_newton_m: 0.0,
             moment_y_newton_m: 0.0,
         };
+        let mut cmds: HVec<Command, 3> = HVec::new();
+        let next = |body: CommandBody, seq: &mut u16| {
+            *seq = seq.wrapping_add(1);
+            Command { seq: *seq, body }
+        };
         if self.last_target != Some(target) || self.load != load {
             let mut v = HVec::new();
             v.push(target)
                 .map_err(|_| SimError::Config("one segment".into()))?;
-            self.expect_ack(CommandBody::SetTarget(Target {
+            let set = CommandBody::SetTarget(Target {
                 kind: TargetKind::Configuration(v),
                 load,
-            }))?;
+            });
+            let _ = cmds.push(next(set, &mut self.seq));
             if self.last_target.is_none() {
-                self.expect_ack(CommandBody::SetMode(self.mode))?;
+                let _ = cmds.push(next(CommandBody::SetMode(self.mode), &mut self.seq));
             }
             self.last_target = Some(target);
             self.load = load;
@@ -215,8 +318,27 @@ impl Mcu for FirmwareMcu<'_> {
             imu_quat_q14: quat,
             pressures_pa: s.pressures_pa.iter().map(|p| p.round() as i32).collect(),
         };
+        let _ = cmds.push(next(CommandBody::SensorFrame(frame), &mut self.seq));
         self.now_us = self.now_us.wrapping_add(self.period_us);
-        match self.send(CommandBody::SensorFrame(frame)).body {
+        let replies = self.link.exchange_all(&cmds, self.now_us)?;
+        if replies.len() != cmds.len() {
+            return Err(self.unexpected_count(cmds.len(), replies.len()));
+        }
+        for (c, r) in cmds.iter().zip(&replies) {
+            if r.seq != c.seq {
+                return Err(SimError::Mcu {
+                    name: self.name.clone(),
+                    message: format!("reply to command {} answers command {}", c.seq, r.seq),
+                });
+            }
+        }
+        let (last, setup) = replies
+            .split_last()
+            .ok_or_else(|| self.unexpected_count(1, 0))?;
+        if let Some(bad) = setup.iter().find(|r| r.body != ReplyBody::Ack) {
+            return Err(self.unexpected(&bad.body));
+        }
+        match &last.body {
             ReplyBody::Telemetry(t) => {
                 let mut out = [0.0; 3];
                 for (o, p) in out.iter_mut().zip(t.commanded_pa_q8.iter()) {
@@ -224,10 +346,7 @@ impl Mcu for FirmwareMcu<'_> {
                 }
                 Ok(out)
             }
-            other => Err(SimError::Mcu {
-                name: self.name.clone(),
-                message: format!("unexpected reply {other:?}"),
-            }),
+            other => Err(self.unexpected(other)),
         }
     }
 }
@@ -235,38 +354,92 @@ impl Mcu for FirmwareMcu<'_> {
 /// Runs time-domain scenario `name` with the in-process firmware in open
 /// loop (`firmware_ol`) and closed loop (`firmware_cl`), beside the host
 /// oracle as the floor; `ol_rmse_mm` and `cl_rmse_mm` are the firmware's.
+/// The three runs share nothing and go in parallel.
 pub fn run_scenario_with_firmware(
     name: &str,
     cfg: &crate::SimConfig,
 ) -> Result<crate::ScenarioReport, SimError> {
-    let image = lut_image(&cfg.plant, &cfg.limits)?;
-    let mut runs = Vec::new();
-    for (closed, label) in [(false, "firmware_ol"), (true, "firmware_cl")] {
+    run_scenario_with_image(name, cfg, &lut_image(&cfg.plant, &cfg.limits)?)
+}
+
+/// [`run_scenario_with_firmware`] with the LUT `image` given (one built by
+/// `ocm lut build`, or shared between scenarios).
+pub fn run_scenario_with_image(
+    name: &str,
+    cfg: &crate::SimConfig,
+    image: &[u8],
+) -> Result<crate::ScenarioReport, SimError> {
+    run_firmware_pair(name, cfg, true, |closed| {
         let mut buf = vec![0u8; LUT_CAPACITY];
-        let mut fw = FirmwareMcu::new(
-            &mut buf,
-            &image,
-            &cfg.plant,
-            &cfg.hall,
-            &cfg.gains,
-            &cfg.limits,
-            closed,
-        )?;
-        let mut run = crate::run_with_mcu(name, cfg, &mut fw)?;
-        run.controller = label.to_string();
-        runs.push(run);
-    }
+        let mut fw = FirmwareMcu::in_process(&mut buf, image, cfg, closed)?;
+        crate::run_with_mcu(name, cfg, &mut fw)
+    })
+}
+
+/// Runs time-domain scenario `name` with the firmware behind links that
+/// `open` makes, a fresh one for each run (open loop, closed loop), beside
+/// the host oracle: PIL under QEMU, or a real board (`parallel` false: one
+/// board serves one run at a time). `image` is the LUT uploaded to it.
+pub fn run_scenario_over<L: Link>(
+    name: &str,
+    cfg: &crate::SimConfig,
+    image: &[u8],
+    parallel: bool,
+    open: impl Fn() -> Result<L, SimError> + Sync,
+) -> Result<crate::ScenarioReport, SimError> {
+    run_firmware_pair(name, cfg, parallel, |closed| {
+        let mut fw = FirmwareMcu::new(open()?, image, cfg, closed)?;
+        crate::run_with_mcu(name, cfg, &mut fw)
+    })
+}
+
+/// Runs `name` through `run` in open and closed loop (the argument says
+/// which), labels the runs `firmware_ol` and `firmware_cl` and adds the
+/// host oracle as the floor, on two threads when `parallel`. The report's
+/// `realtime_factor` is the simulated time of the two firmware runs over
+/// the wall time of all three.
+pub fn run_firmware_pair(
+    name: &str,
+    cfg: &crate::SimConfig,
+    parallel: bool,
+    run: impl Fn(bool) -> Result<crate::RunReport, SimError> + Sync,
+) -> Result<crate::ScenarioReport, SimError> {
     let oracle_cfg = crate::SimConfig {
         controllers: vec![crate::ControllerKind::Oracle],
         ..cfg.clone()
     };
-    let mut report = crate::run_scenario(name, &oracle_cfg)?;
+    let start = std::time::Instant::now();
+    let (ol, cl, oracle) = if parallel {
+        std::thread::scope(|s| {
+            let ol = s.spawn(|| run(false));
+            let oracle = s.spawn(|| crate::run_scenario(name, &oracle_cfg));
+            let cl = run(true);
+            let lost = |what: &str| SimError::Mcu {
+                name: what.into(),
+                message: "the run's thread panicked".into(),
+            };
+            (
+                ol.join().unwrap_or_else(|_| Err(lost("firmware_ol"))),
+                cl,
+                oracle.join().unwrap_or_else(|_| Err(lost("oracle"))),
+            )
+        })
+    } else {
+        (
+            run(false),
+            run(true),
+            crate::run_scenario(name, &oracle_cfg),
+        )
+    };
+    let wall = start.elapsed().as_secs_f64();
+    let mut report = oracle?;
+    let mut runs = vec![ol?, cl?];
+    runs[0].controller = "firmware_ol".into();
+    runs[1].controller = "firmware_cl".into();
     report.ol_rmse_mm = Some(runs[0].rmse_mm);
     report.cl_rmse_mm = Some(runs[1].rmse_mm);
-    let (sim, wall) = runs.iter().fold((0.0, 0.0), |(s, w), r| {
-        (s + r.sim_s, w + r.sim_s / r.realtime_factor.max(1e-12))
-    });
-    report.realtime_factor = if wall > 0.0 { sim / wall } else { 0.0 };
+    let sim: f64 = runs.iter().map(|r| r.sim_s).sum();
     report.runs.extend(runs);
+    report.realtime_factor = if wall > 0.0 { sim / wall } else { 0.0 };
     Ok(report)
 }

@@ -8,6 +8,12 @@
 //! into commanded pressures. [`scenario`] runs the experiments and
 //! [`metrics`] scores them.
 //!
+//! The MCU under test is the firmware ([`firmware::FirmwareMcu`]) over a
+//! [`firmware::Link`]: linked in process, or a board binary behind a byte
+//! link, under QEMU ([`qemu`], PIL) or on a serial port ([`serial`]). The
+//! command stream is the same in every mode, so the commanded pressures
+//! are too, bit for bit.
+//!
 //! The plant's physics is the OCM energy model of `ocm-lutgen` (through
 //! [`potential`]), never the firmware's LUT, so model error between the two
 //! is real and measurable.
@@ -25,12 +31,17 @@ pub mod pcc;
 pub mod plant;
 pub mod pneumatics;
 pub mod potential;
+#[cfg(feature = "serial")]
+pub mod qemu;
 pub mod reference;
 pub mod scenario;
 pub mod sensors;
+#[cfg(feature = "serial")]
+pub mod serial;
 
 pub use scenario::{
-    ControllerKind, RunReport, SCENARIOS, ScenarioReport, SimConfig, run_scenario, run_with_mcu,
+    ControllerKind, LogRow, RomPoint, RunReport, SCENARIOS, ScenarioReport, SimConfig,
+    run_scenario, run_with_mcu, working_limits,
 };
 
 /// Errors of the simulator.
@@ -55,10 +66,10 @@ pub enum SimError {
         /// What went wrong.
         message: String,
     },
-    /// Writing a log failed.
-    #[error("writing {path}: {message}")]
+    /// A file, device or process failed (a log, a serial port, QEMU).
+    #[error("{path}: {message}")]
     Io {
-        /// The file.
+        /// The file or device.
         path: String,
         /// The cause.
         message: String,

@@ -35,7 +35,7 @@ pub struct McuInput<'a> {
     pub sensors: &'a SensorSample,
     /// The reference being tracked (controllers may look ahead on it).
     pub reference: &'a Path,
-    /// The reference configuration now (`reference.config_at(time_s)`).
+    /// The target sent now: the reference `preview_s` ahead ([`crate::SimConfig::preview`]).
     pub target: Config,
     /// Load announced by the operator (what a `SetTarget` would carry).
     pub expected_load: PlateLoad,
@@ -199,8 +199,8 @@ impl Default for PidGains {
     fn default() -> Self {
         Self {
             kp_pa_per_m: 10_000.0,
-            ki_pa_per_m_s: 60_000.0,
-            kd_pa_s_per_m: 300.0,
+            ki_pa_per_m_s: 400_000.0,
+            kd_pa_s_per_m: 4_000.0,
             filter_s: 0.01,
         }
     }

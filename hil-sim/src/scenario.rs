@@ -78,7 +78,7 @@ pub struct SimConfig {
     pub imu: ImuParams,
     /// Gains of the host PID.
     pub gains: PidGains,
-    /// Command limits of every controller, pascals (regulator range by default).
+    /// Command limits of every controller, pascals ([`working_limits`] by default).
     pub limits: PressureLimits,
     /// Shortened runs (one lap, three points, a 6 s ramp): for tests.
     pub short: bool,
@@ -87,12 +87,76 @@ pub struct SimConfig {
     /// Pressure range of `rom`, pascals; `None` derives the range that
     /// spans column strains -0.45 .. 0.45 at rest under the plate weight.
     pub rom_pressure_pa: Option<(f64, f64)>,
-    /// Whether the open loop is told the payload and tip force.
+    /// Whether every controller is told the payload and tip force in every
+    /// scenario (by default only `points` and `orientation` announce theirs).
     pub ol_knows_load: bool,
     /// Controllers to run.
     pub controllers: Vec<ControllerKind>,
     /// Log decimation: one CSV row every this many control ticks.
     pub log_every: usize,
+    /// Reference preview, seconds: controllers are sent the target this far
+    /// ahead of the reference they are scored against, as a host streams a
+    /// planned path ahead by the actuators' response time. `None` takes the
+    /// regulators' dead time plus time constant (their data-sheet lag).
+    pub preview_s: Option<f64>,
+    /// Cuts every time-domain scenario after this many seconds (a quick
+    /// look, or a PIL smoke run); `None` runs them whole.
+    pub duration_cap_s: Option<f64>,
+    /// Period of target updates, seconds: the host streams the reference at
+    /// this rate (a board's own loop runs at `plant.dt_s`); 0 sends one
+    /// every control tick.
+    pub target_period_s: f64,
+}
+
+/// The heaviest load any scenario puts on the plate, kilograms and newtons
+/// along gravity: the `points` payload with the end of the `orientation`
+/// force ramp.
+const HEAVIEST_LOAD: (f64, f64) = (0.250, 1.80);
+
+/// Column strain the working pressure range reaches at either end.
+const WORKING_STRAIN: f64 = 0.55;
+
+/// The working pressure range of `plant`: every pressure that holds the
+/// columns within strain -0.55..0.55, unloaded or under the heaviest
+/// scenario load, inside the regulator range.
+///
+/// Why not the regulator's own range: the OCMs use a few kilopascals of
+/// it; a controller allowed the rest (a winding integrator, a chamber cut)
+/// crushes the columns onto their end stops and out of the Hall sensors'
+/// range, which the firmware rightly treats as a sensor fault.
+pub fn working_limits(plant: &PlantParams) -> PressureLimits {
+    let reg = PressureLimits {
+        min_pa: plant.regulator.min_pa,
+        max_pa: plant.regulator.max_pa,
+    };
+    let Ok(p) = Plant::new(*plant, 0) else {
+        return reg;
+    };
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let heaviest = PlateLoad {
+        payload_kg: HEAVIEST_LOAD.0,
+        force_n: [
+            0.0,
+            0.0,
+            plant.mounting.gravity_z().signum() * HEAVIEST_LOAD.1,
+        ],
+    };
+    for load in [PlateLoad::default(), heaviest] {
+        let tension = p.external_force_n(&load)[2] / 3.0;
+        for eps in [-WORKING_STRAIN, WORKING_STRAIN] {
+            let t = p.model().axial_terms(eps);
+            let pa = (tension - t.bar_n - t.hinge_n) / t.pressure_n_per_pa;
+            lo = lo.min(pa);
+            hi = hi.max(pa);
+        }
+    }
+    if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+        return reg;
+    }
+    PressureLimits {
+        min_pa: lo.max(reg.min_pa),
+        max_pa: hi.min(reg.max_pa),
+    }
 }
 
 impl Default for SimConfig {
@@ -103,10 +167,7 @@ impl Default for SimConfig {
         };
         Self {
             seed: 1,
-            limits: PressureLimits {
-                min_pa: plant.regulator.min_pa,
-                max_pa: plant.regulator.max_pa,
-            },
+            limits: working_limits(&plant),
             plant,
             hall: HallParams::default(),
             imu: ImuParams::default(),
@@ -121,11 +182,20 @@ impl Default for SimConfig {
                 ControllerKind::Oracle,
             ],
             log_every: 10,
+            preview_s: None,
+            duration_cap_s: None,
+            target_period_s: 0.01,
         }
     }
 }
 
 impl SimConfig {
+    /// The reference preview in effect, seconds.
+    pub fn preview(&self) -> f64 {
+        self.preview_s
+            .unwrap_or(self.plant.regulator.dead_time_s + self.plant.regulator.time_constant_s)
+    }
+
     /// Checks the settings the plant does not check itself.
     pub fn validate(&self) -> Result<(), SimError> {
         let bad = |what: &str, v: f64| SimError::Config(format!("{what} = {v} is out of range"));
@@ -164,6 +234,19 @@ impl SimConfig {
         }
         if !(2..=64).contains(&self.rom_levels) {
             return Err(bad("rom_levels", self.rom_levels as f64));
+        }
+        if !(self.target_period_s.is_finite() && (0.0..=1.0).contains(&self.target_period_s)) {
+            return Err(bad("target_period_s", self.target_period_s));
+        }
+        if let Some(d) = self.duration_cap_s
+            && !(d.is_finite() && d > 0.0)
+        {
+            return Err(bad("duration_cap_s", d));
+        }
+        if let Some(p) = self.preview_s
+            && !(p.is_finite() && (0.0..=2.0).contains(&p))
+        {
+            return Err(bad("preview_s", p));
         }
         if let Some((a, b)) = self.rom_pressure_pa
             && !(a.is_finite() && b.is_finite() && a < b)
@@ -246,12 +329,12 @@ impl RunReport {
         for r in &self.log {
             w.serialize(r).map_err(|e| SimError::Io {
                 path: "<memory>".into(),
-                message: e.to_string(),
+                message: format!("writing: {e}"),
             })?;
         }
         w.into_inner().map_err(|e| SimError::Io {
             path: "<memory>".into(),
-            message: e.to_string(),
+            message: format!("writing: {e}"),
         })
     }
 }
@@ -275,16 +358,61 @@ pub struct ScenarioReport {
     pub figures: BTreeMap<String, f64>,
     /// One entry per controller.
     pub runs: Vec<RunReport>,
+    /// `rom` only: every solved pressure combination.
+    #[serde(skip)]
+    pub cloud: Vec<RomPoint>,
+}
+
+/// One `rom` pressure combination: where the plant settles and where the
+/// model puts it (CSV row; units in the column names).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RomPoint {
+    /// Chamber pressure 1, Pa.
+    pub p1_pa: f64,
+    /// Chamber pressure 2, Pa.
+    pub p2_pa: f64,
+    /// Chamber pressure 3, Pa.
+    pub p3_pa: f64,
+    /// Plant tip x, mm.
+    pub x_mm: f64,
+    /// Plant tip y, mm.
+    pub y_mm: f64,
+    /// Plant tip z, mm.
+    pub z_mm: f64,
+    /// Model tip x, mm.
+    pub model_x_mm: f64,
+    /// Model tip y, mm.
+    pub model_y_mm: f64,
+    /// Model tip z, mm.
+    pub model_z_mm: f64,
+    /// Position error, mm.
+    pub err_mm: f64,
+    /// Orientation error, rad (eq 3.42).
+    pub q_err_rad: f64,
 }
 
 impl ScenarioReport {
-    /// Writes one CSV log per run as `DIR/<scenario>_<controller>.csv`.
+    /// Writes one CSV log per run as `DIR/<scenario>_<controller>.csv`, and
+    /// the `rom` cloud as `DIR/rom_cloud.csv`.
     pub fn write_csv(&self, dir: &std::path::Path) -> Result<(), SimError> {
+        if !self.cloud.is_empty() {
+            let path = dir.join("rom_cloud.csv");
+            let io = |e: String| SimError::Io {
+                path: path.display().to_string(),
+                message: e,
+            };
+            std::fs::create_dir_all(dir).map_err(|e| io(format!("writing: {e}")))?;
+            let mut w = csv::Writer::from_path(&path).map_err(|e| io(format!("writing: {e}")))?;
+            for p in &self.cloud {
+                w.serialize(p).map_err(|e| io(format!("writing: {e}")))?;
+            }
+            w.flush().map_err(|e| io(format!("writing: {e}")))?;
+        }
         for r in &self.runs {
             let path = dir.join(format!("{}_{}.csv", self.name, r.controller));
             let io = |e: std::io::Error| SimError::Io {
                 path: path.display().to_string(),
-                message: e.to_string(),
+                message: format!("writing: {e}"),
             };
             std::fs::create_dir_all(dir).map_err(io)?;
             std::fs::write(&path, r.csv_bytes()?).map_err(io)?;
@@ -306,6 +434,10 @@ struct Setup {
     cut: Option<(usize, f64, f64)>,
     /// Payload added at this time, kilograms: `(time, mass)`.
     payload_step: Option<(f64, f64)>,
+    /// Whether the operator announces the load to the controller (the
+    /// experiment's own payload and force, as in the dissertation); an
+    /// unannounced load is a disturbance the feedback must reject.
+    announced: bool,
 }
 
 impl Setup {
@@ -349,6 +481,7 @@ fn setup(name: &str, cfg: &SimConfig) -> Result<Setup, SimError> {
                 force_ramp: None,
                 cut: (name == "disconnect").then_some((0, settle + 5.0, settle + 10.0)),
                 payload_step: None,
+                announced: false,
             }
         }
         "triangle" => {
@@ -368,6 +501,7 @@ fn setup(name: &str, cfg: &SimConfig) -> Result<Setup, SimError> {
                 force_ramp: None,
                 cut: None,
                 payload_step: None,
+                announced: false,
             }
         }
         "points" => {
@@ -393,6 +527,7 @@ fn setup(name: &str, cfg: &SimConfig) -> Result<Setup, SimError> {
                 force_ramp: None,
                 cut: None,
                 payload_step: None,
+                announced: true,
             }
         }
         "orientation" => {
@@ -405,6 +540,7 @@ fn setup(name: &str, cfg: &SimConfig) -> Result<Setup, SimError> {
                 force_ramp: Some((settle, 0.75, settle + ramp, 1.80)),
                 cut: None,
                 payload_step: None,
+                announced: true,
             }
         }
         "step_load" => Setup {
@@ -415,6 +551,7 @@ fn setup(name: &str, cfg: &SimConfig) -> Result<Setup, SimError> {
             force_ramp: None,
             cut: None,
             payload_step: Some((settle, 0.250)),
+            announced: false,
         },
         other => return Err(SimError::UnknownScenario(other.to_string())),
     })
@@ -471,6 +608,7 @@ pub fn run_scenario(name: &str, cfg: &SimConfig) -> Result<ScenarioReport, SimEr
         realtime_factor: if wall > 0.0 { sim / wall } else { 0.0 },
         figures: BTreeMap::new(),
         runs,
+        cloud: Vec::new(),
     })
 }
 
@@ -505,7 +643,10 @@ fn simulate(
         f64::from(cfg.plant.manipulator.ocms_per_column),
         ChaCha8Rng::seed_from_u64(cfg.seed.wrapping_add(0x5e05)),
     );
-    let steps = (su.duration_s / dt).round() as usize;
+    let duration = cfg
+        .duration_cap_s
+        .map_or(su.duration_s, |c| c.min(su.duration_s));
+    let steps = (duration / dt).round() as usize;
     let mut log = Vec::new();
     let mut errs = Vec::new();
     let mut err_t = Vec::new();
@@ -515,6 +656,7 @@ fn simulate(
     let mut violations = 0usize;
     let start = Instant::now();
     let expected = PlateLoad::default();
+    let preview = cfg.preview();
     for k in 0..steps {
         let t = k as f64 * dt;
         state.load = su.load_at(t, cfg);
@@ -522,8 +664,9 @@ fn simulate(
             state.connected[ch] = !(t >= a && t < b);
         }
         let sample = sensors.sample(&state.q, state.pressures_pa());
-        let announced = if cfg.ol_knows_load {
-            state.load
+        // Announced loads reach the controller with the target updates.
+        let announced = if cfg.ol_knows_load || su.announced {
+            su.load_at(target_time(t, cfg.target_period_s), cfg)
         } else {
             expected
         };
@@ -531,14 +674,16 @@ fn simulate(
             time_s: t,
             sensors: &sample,
             reference: &su.path,
-            target: su.path.config_at(t),
+            target: su
+                .path
+                .config_at(target_time(t, cfg.target_period_s) + preview),
             expected_load: announced,
             true_load: state.load,
             true_hysteresis_n: plant.hysteresis_n(&state),
         };
         let cmd = mcu.tick(&input).map_err(|e| SimError::Mcu {
             name: mcu.name().to_string(),
-            message: e.to_string(),
+            message: format!("at t = {t:.3} s: {e}"),
         })?;
         plant.step(&mut state, cmd);
         let p = state.pressures_pa();
@@ -548,10 +693,12 @@ fn simulate(
             cmd_hi = cmd_hi.max(cmd[i]);
             cmd_lo = cmd_lo.min(cmd[i]);
             let lim = &cfg.plant.regulator;
+            // The firmware holds its limits in f32 and commands in Q24.8.
+            let tol = 1e-6 * cfg.limits.max_pa.abs().max(cfg.limits.min_pa.abs()) + 1.0 / 128.0;
             if p[i] > lim.max_pa + 1e-9
                 || p[i] < lim.min_pa - 1e-9
-                || cmd[i] > cfg.limits.max_pa
-                || cmd[i] < cfg.limits.min_pa
+                || cmd[i] > cfg.limits.max_pa + tol
+                || cmd[i] < cfg.limits.min_pa - tol
             {
                 violations += 1;
             }
@@ -653,6 +800,16 @@ fn simulate(
     })
 }
 
+/// The time of the last target update at or before `t`.
+fn target_time(t: f64, period_s: f64) -> f64 {
+    if period_s > 0.0 {
+        // The small bias keeps t = k * period on update k despite rounding.
+        (t / period_s + 1e-9).floor() * period_s
+    } else {
+        t
+    }
+}
+
 fn points_figures(su: &Setup, t: &[f64], e: &[f64], out: &mut BTreeMap<String, f64>) {
     let Path::Points { targets_m, dwell_s } = &su.path else {
         return;
@@ -744,6 +901,7 @@ fn rom(cfg: &SimConfig) -> Result<ScenarioReport, SimError> {
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut theta_max: f64 = 0.0;
     let mut failed = 0usize;
+    let mut cloud = Vec::with_capacity(n * n * n);
     let lim = model.strain_limits();
     for a in 0..n {
         for b in 0..n {
@@ -767,10 +925,21 @@ fn rom(cfg: &SimConfig) -> Result<ScenarioReport, SimError> {
                 let (x, xh) = (actual.position(), predicted.position());
                 let e = distance(x, xh);
                 errs.push(e);
-                q_errs.push(quaternion_error_rad(
-                    actual.quaternion(),
-                    predicted.quaternion(),
-                ));
+                let qe = quaternion_error_rad(actual.quaternion(), predicted.quaternion());
+                q_errs.push(qe);
+                cloud.push(RomPoint {
+                    p1_pa: p[0],
+                    p2_pa: p[1],
+                    p3_pa: p[2],
+                    x_mm: x[0] * 1e3,
+                    y_mm: x[1] * 1e3,
+                    z_mm: x[2] * 1e3,
+                    model_x_mm: xh[0] * 1e3,
+                    model_y_mm: xh[1] * 1e3,
+                    model_z_mm: xh[2] * 1e3,
+                    err_mm: e * 1e3,
+                    q_err_rad: qe,
+                });
                 theta_max = theta_max.max(actual.bend_rad());
                 if x[0].abs() <= 0.05 && x[1].abs() <= 0.05 && (0.07..=0.14).contains(&x[2]) {
                     reduced.push(e);
@@ -825,5 +994,6 @@ fn rom(cfg: &SimConfig) -> Result<ScenarioReport, SimError> {
             figures
         },
         runs: Vec::new(),
+        cloud,
     })
 }

@@ -12,168 +12,12 @@
 //! Skips (passing, with a message) when qemu-system-arm or the Cortex-M
 //! target is not installed.
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command as Proc, Stdio};
-use std::time::{Duration, Instant};
-
 use ocm_firmware::app::{App, AppConfig};
 use ocm_firmware::bringup;
+use ocm_hilsim::firmware::Link;
+use ocm_hilsim::qemu::{QemuLink, board_for_pil};
 use ocm_shared::params::OcmParams;
 use ocm_shared::protocol::*;
-
-const TARGET: &str = "thumbv7em-none-eabihf";
-
-fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn have(cmd: &str, arg: &str) -> bool {
-    Proc::new(cmd)
-        .arg(arg)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .status()
-        .is_ok_and(|s| s.success())
-}
-
-fn target_installed() -> bool {
-    // Without rustup, assume the target may exist and let the build decide.
-    match Proc::new("rustup")
-        .args(["target", "list", "--installed"])
-        .output()
-    {
-        Ok(o) => String::from_utf8_lossy(&o.stdout)
-            .lines()
-            .any(|l| l.trim() == TARGET),
-        Err(_) => true,
-    }
-}
-
-/// Builds the board binary; `None` (with a message) when that is impossible.
-fn build_board() -> Option<PathBuf> {
-    let board = repo_root().join("firmware/boards/qemu");
-    let target_dir = repo_root().join("target-boards");
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let out = Proc::new(cargo)
-        .current_dir(&board)
-        .env("CARGO_TARGET_DIR", &target_dir)
-        .args(["build", "--release", "--bin", "ocm-qemu"])
-        .output()
-        .expect("cargo runs");
-    if !out.status.success() {
-        let err = String::from_utf8_lossy(&out.stderr);
-        if err.contains("may not be installed") || err.contains("can't find crate for `core`") {
-            eprintln!("SKIP qemu test: target {TARGET} is not installed");
-            return None;
-        }
-        panic!("building the QEMU board failed:\n{err}");
-    }
-    Some(target_dir.join(TARGET).join("release/ocm-qemu"))
-}
-
-struct Qemu {
-    child: Child,
-}
-
-impl Drop for Qemu {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// Boots the ELF and returns the process and its UART pty path.
-fn boot(elf: &Path) -> (Qemu, String) {
-    let mut child = Proc::new("qemu-system-arm")
-        .args([
-            "-cpu",
-            "cortex-m4",
-            "-machine",
-            "mps2-an386",
-            "-display",
-            "none",
-            "-monitor",
-            "none",
-        ])
-        .args([
-            "-semihosting-config",
-            "enable=on,target=native",
-            "-serial",
-            "pty",
-            "-kernel",
-        ])
-        .arg(elf)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("qemu-system-arm starts");
-    // QEMU announces the pty on stderr (older versions: stdout).
-    let (tx, rx) = std::sync::mpsc::channel();
-    for stream in [
-        Box::new(child.stderr.take().expect("piped")) as Box<dyn Read + Send>,
-        Box::new(child.stdout.take().expect("piped")),
-    ] {
-        let tx = tx.clone();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stream).lines().map_while(Result::ok) {
-                if let Some(i) = line.find("/dev/pts/") {
-                    let path: String = line[i..]
-                        .chars()
-                        .take_while(|c| !c.is_whitespace() && *c != ')')
-                        .collect();
-                    let _ = tx.send(path);
-                }
-            }
-        });
-    }
-    let path = rx
-        .recv_timeout(Duration::from_secs(20))
-        .expect("QEMU printed its pty");
-    (Qemu { child }, path)
-}
-
-struct Link {
-    port: Box<dyn serialport::SerialPort>,
-    decoder: FrameDecoder,
-}
-
-impl Link {
-    fn send(&mut self, cmd: &Command) {
-        let mut buf = [0u8; MAX_ENCODED_FRAME];
-        let n = encode_frame(cmd, &mut buf).expect("command encodes");
-        self.port.write_all(&buf[..n]).expect("pty write");
-        self.port.flush().expect("pty flush");
-    }
-
-    fn recv(&mut self, timeout: Duration) -> Option<Reply> {
-        let end = Instant::now() + timeout;
-        let mut b = [0u8; 1];
-        while Instant::now() < end {
-            match self.port.read(&mut b) {
-                Ok(1) => {
-                    if let Some(r) = self.decoder.push::<Reply>(b[0]) {
-                        return Some(r.expect("firmware frames decode"));
-                    }
-                }
-                Ok(_) => {}
-                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
-                Err(e) => panic!("pty read: {e}"),
-            }
-        }
-        None
-    }
-
-    fn call(&mut self, cmd: &Command) -> Reply {
-        self.send(cmd);
-        let r = self
-            .recv(Duration::from_secs(10))
-            .expect("firmware replies");
-        assert_eq!(r.seq, cmd.seq, "reply to the wrong command: {r:?}");
-        r
-    }
-}
 
 fn setup_commands(img: &[u8]) -> Vec<CommandBody> {
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(img);
@@ -247,47 +91,17 @@ fn sensor_frame(k: u32) -> SensorFrame {
 
 #[test]
 fn qemu_firmware_matches_in_process_firmware_bit_for_bit() {
-    if !have("qemu-system-arm", "--version") {
-        eprintln!("SKIP qemu test: qemu-system-arm not found (apt-get install qemu-system-arm)");
-        return;
-    }
-    if !target_installed() {
-        eprintln!(
-            "SKIP qemu test: rustup target {TARGET} not installed (rustup target add {TARGET})"
-        );
-        return;
-    }
-    let Some(elf) = build_board() else { return };
-    let (_qemu, pty) = boot(&elf);
-    let port = serialport::new(&pty, 115_200)
-        .timeout(Duration::from_millis(50))
-        .open()
-        .expect("pty opens");
-    let mut link = Link {
-        port,
-        decoder: FrameDecoder::new(),
-    };
-
-    // Handshake: bytes sent before the pty was opened are lost, so ping
-    // until the firmware answers.
-    let mut seq = 0u16;
-    let mut alive = false;
-    for _ in 0..100 {
-        seq += 1;
-        link.send(&Command {
-            seq,
-            body: CommandBody::Ping { nonce: 0xfeed },
-        });
-        if let Some(r) = link.recv(Duration::from_millis(200))
-            && r.body == (ReplyBody::Pong { nonce: 0xfeed })
-        {
-            alive = true;
-            break;
+    let elf = match board_for_pil().expect("the board builds") {
+        Ok(elf) => elf,
+        Err(why) => {
+            eprintln!("SKIP qemu test: {why}");
+            return;
         }
-    }
-    assert!(alive, "firmware never answered a ping");
-    // Drain late pongs of earlier pings.
-    while link.recv(Duration::from_millis(300)).is_some() {}
+    };
+    // Boots, then pings until the firmware answers.
+    let mut link = QemuLink::boot(&elf).expect("QEMU boots and answers");
+    let mut seq = 0u16;
+    let mut call = |cmd: &Command| link.exchange(cmd, 0).expect("firmware replies");
 
     let mut img = vec![0u8; 32 * 1024];
     let n = bringup::write_image(&OcmParams::TABLE_3_1, &mut img).unwrap();
@@ -298,7 +112,7 @@ fn qemu_firmware_matches_in_process_firmware_bit_for_bit() {
     for body in setup_commands(img) {
         seq += 1;
         let cmd = Command { seq, body };
-        let remote = link.call(&cmd);
+        let remote = call(&cmd);
         now += 1_000;
         let mine = local.handle(&cmd, now);
         match (&remote.body, &mine.body) {
@@ -314,7 +128,7 @@ fn qemu_firmware_matches_in_process_firmware_bit_for_bit() {
             seq,
             body: CommandBody::SensorFrame(sensor_frame(k)),
         };
-        let remote = link.call(&cmd);
+        let remote = call(&cmd);
         now += 1_000;
         let mine = local.handle(&cmd, now);
         let (ReplyBody::Telemetry(a), ReplyBody::Telemetry(b)) = (&remote.body, &mine.body) else {

@@ -2,7 +2,7 @@
 
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use ocm_fem::bellows::{Bellows, BellowsConfig, Law};
+use ocm_fem::bellows::{Bellows, BellowsConfig, Law, RigidMode};
 use ocm_fem::calibrate;
 use ocm_fem::mesh::{stl, vtk};
 use ocm_fem::scene::Scene;
@@ -54,6 +54,9 @@ pub enum FemCommand {
         /// Poisson's ratio.
         #[arg(long, default_value_t = 0.45)]
         poisson: f64,
+        /// Rigid parts (base connectors, top frame): true rigid bodies or a stiff penalty.
+        #[arg(long, value_enum, default_value = "constraint")]
+        rigid: RigidArg,
         /// CSV output.
         #[arg(long, default_value = "bellows_sweep.csv")]
         out: PathBuf,
@@ -127,6 +130,24 @@ pub enum LawArg {
     NeoHookean,
     /// Neo-Hookean eq 5.6.
     NeoHookeanBulk,
+}
+
+/// How the bellows' rigid parts are modelled.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum RigidArg {
+    /// Rigid-body constraints (six DOFs per part, exactly rigid).
+    Constraint,
+    /// Stiff penalty (elements 100x stiffer).
+    Penalty,
+}
+
+impl From<RigidArg> for RigidMode {
+    fn from(r: RigidArg) -> Self {
+        match r {
+            RigidArg::Constraint => RigidMode::Constraint,
+            RigidArg::Penalty => RigidMode::Penalty,
+        }
+    }
 }
 
 impl From<LawArg> for Law {
@@ -243,6 +264,7 @@ pub fn run(cmd: FemCommand) -> anyhow::Result<()> {
             law,
             young_pa,
             poisson,
+            rigid,
             out,
             npy,
             reference,
@@ -252,6 +274,7 @@ pub fn run(cmd: FemCommand) -> anyhow::Result<()> {
                 law: law.into(),
                 young_pa,
                 poisson,
+                rigid: rigid.into(),
                 ..BellowsConfig::default()
             };
             let b = Bellows::load(&mesh, cfg)?;

@@ -170,6 +170,7 @@ fn plot(file: &Path, out: &Path) -> Result<()> {
         axial.push(Series {
             label: format!("{:.0} kPa", p / 1e3),
             points,
+            dots: false,
         });
     }
     Chart {
@@ -204,6 +205,7 @@ fn plot(file: &Path, out: &Path) -> Result<()> {
         bending.push(Series {
             label: format!("s = {:.1} mm", s * 1e3),
             points,
+            dots: false,
         });
     }
     Chart {

@@ -1,20 +1,56 @@
-//! `ocm track`: the dissertation's experiments in the virtual lab, with the
-//! host controllers (open loop, model feed-forward + PID, and the oracle).
+//! `ocm track`: the dissertation's experiments in the virtual lab. The
+//! firmware runs in open and closed loop, in process, under QEMU or on a
+//! real board, beside the oracle; `--mcu host` runs the host controllers.
 
 use std::path::PathBuf;
+use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
-use ocm_hilsim::firmware::run_scenario_with_firmware;
-use ocm_hilsim::{SCENARIOS, SimConfig, run_scenario};
+use ocm_hilsim::firmware::{lut_image, run_scenario_over, run_scenario_with_image};
+use ocm_hilsim::qemu::{QemuLink, build_board};
+use ocm_hilsim::serial::SerialLink;
+use ocm_hilsim::{SCENARIOS, ScenarioReport, SimConfig, run_scenario};
+
+use crate::plot_track;
 
 /// Which controller sits in the loop as the MCU.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub enum McuMode {
     /// The host's own controllers (open loop, feed-forward + PID).
     Host,
     /// The firmware library linked in process, fed the same protocol
-    /// frames a real board gets, in open and closed loop.
+    /// messages a real board gets.
     Inproc,
+    /// The firmware binary in qemu-system-arm over its UART pty (PIL).
+    Qemu,
+    /// A real board on a serial port.
+    Port(String),
+}
+
+impl McuMode {
+    /// Report label.
+    fn label(&self) -> String {
+        match self {
+            Self::Host => "host".into(),
+            Self::Inproc => "inproc".into(),
+            Self::Qemu => "qemu".into(),
+            Self::Port(p) => format!("port:{p}"),
+        }
+    }
+}
+
+fn parse_mcu(s: &str) -> Result<McuMode, String> {
+    match s {
+        "host" => Ok(McuMode::Host),
+        "inproc" => Ok(McuMode::Inproc),
+        "qemu" => Ok(McuMode::Qemu),
+        _ => match s.strip_prefix("port:") {
+            Some(p) if !p.is_empty() => Ok(McuMode::Port(p.to_string())),
+            _ => Err(format!(
+                "`{s}`: expected host, inproc, qemu or port:PATH (e.g. port:/dev/ttyACM0)"
+            )),
+        },
+    }
 }
 
 /// Arguments of `ocm track`.
@@ -32,12 +68,53 @@ pub struct TrackArgs {
     /// Print one JSON summary per scenario.
     #[arg(long)]
     json: bool,
-    /// Write CSV logs and `summary.json` here.
+    /// Write CSV logs, `summary.json` and plots (PNG and SVG) here.
     #[arg(long)]
     out: Option<PathBuf>,
-    /// The controller under test; the oracle always runs beside it.
-    #[arg(long, value_enum, default_value = "host")]
+    /// The MCU under test: inproc, qemu, port:PATH, or host (the host's
+    /// own controllers). The oracle always runs beside it.
+    #[arg(long, default_value = "inproc", value_parser = parse_mcu)]
     mcu: McuMode,
+    /// Cut every time-domain scenario after this many seconds.
+    #[arg(long, value_name = "SECONDS")]
+    duration: Option<f64>,
+    /// Firmware ELF for `--mcu qemu` (default: build firmware/boards/qemu).
+    #[arg(long)]
+    elf: Option<PathBuf>,
+    /// Baud rate for `--mcu port:PATH`.
+    #[arg(long, default_value_t = 115_200)]
+    baud: u32,
+    /// LUT image to load into the firmware (default: build one from the
+    /// energy model for the lab's working pressure range).
+    #[arg(long)]
+    lut: Option<PathBuf>,
+}
+
+/// Where the firmware runs and what it is given.
+struct Mcu<'a> {
+    mode: &'a McuMode,
+    elf: Option<PathBuf>,
+    baud: u32,
+    image: Vec<u8>,
+}
+
+/// Runs one scenario with the chosen MCU.
+fn run_one(name: &str, cfg: &SimConfig, mcu: &Mcu) -> Result<ScenarioReport> {
+    // `rom` is a static comparison of model and plant: no controller.
+    if name == "rom" || *mcu.mode == McuMode::Host {
+        return Ok(run_scenario(name, cfg)?);
+    }
+    let image = &mcu.image;
+    Ok(match mcu.mode {
+        McuMode::Qemu => {
+            let elf = mcu.elf.as_ref().context("no firmware ELF")?;
+            run_scenario_over(name, cfg, image, false, || QemuLink::boot(elf))?
+        }
+        McuMode::Port(path) => run_scenario_over(name, cfg, image, false, || {
+            SerialLink::open(path, mcu.baud, Duration::from_secs(5))
+        })?,
+        _ => run_scenario_with_image(name, cfg, image)?,
+    })
 }
 
 /// Runs `ocm track`.
@@ -56,7 +133,43 @@ pub fn run(args: TrackArgs) -> Result<()> {
     let cfg = SimConfig {
         seed: args.seed,
         short: args.short,
+        duration_cap_s: args.duration,
         ..SimConfig::default()
+    };
+    let elf = match (&args.mcu, &args.elf) {
+        (McuMode::Qemu, Some(e)) => Some(e.clone()),
+        (McuMode::Qemu, None) => {
+            if !args.json {
+                eprintln!("building the QEMU board (firmware/boards/qemu) ...");
+            }
+            Some(build_board()?)
+        }
+        _ => None,
+    };
+    let image = match &args.lut {
+        Some(path) => {
+            std::fs::read(path).with_context(|| format!("reading the LUT {}", path.display()))?
+        }
+        None => lut_image(&cfg.plant, &cfg.limits)?,
+    };
+    if !args.json && args.mcu != McuMode::Host {
+        println!(
+            "LUT: {} B {}; command limits {:.0} .. {:.0} Pa; firmware: {}",
+            image.len(),
+            args.lut.as_ref().map_or_else(
+                || "built from the energy model for the lab's working range".to_string(),
+                |p| format!("from {}", p.display())
+            ),
+            cfg.limits.min_pa,
+            cfg.limits.max_pa,
+            args.mcu.label()
+        );
+    }
+    let mcu = Mcu {
+        mode: &args.mcu,
+        elf,
+        baud: args.baud,
+        image,
     };
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -70,22 +183,25 @@ pub fn run(args: TrackArgs) -> Result<()> {
     }
     let mut all = Vec::new();
     for name in names {
-        let report = if args.mcu == McuMode::Inproc && name != "rom" {
-            run_scenario_with_firmware(name, &cfg).map_err(anyhow::Error::from)
-        } else {
-            run_scenario(name, &cfg).map_err(anyhow::Error::from)
-        }
-        .with_context(|| format!("scenario {name}"))?;
+        let report = run_one(name, &cfg, &mcu)
+            .with_context(|| format!("scenario {name} with --mcu {}", args.mcu.label()))?;
         if args.json {
             println!("{}", serde_json::to_string(&report)?);
         } else {
+            let rt = report.realtime_factor;
             println!(
-                "{:<12} {:>10} {:>10} {:>10} {:>10.0}",
+                "{:<12} {:>10} {:>10} {:>10} {:>10}",
                 name,
                 fmt(report.ol_rmse_mm),
                 fmt(report.cl_rmse_mm),
                 fmt(report.oracle_rmse_mm),
-                report.realtime_factor
+                if rt == 0.0 {
+                    "-".to_string()
+                } else if rt < 10.0 {
+                    format!("{rt:.2}")
+                } else {
+                    format!("{rt:.0}")
+                }
             );
             for (k, v) in &report.figures {
                 println!("    {k} = {v:.4}");
@@ -95,6 +211,7 @@ pub fn run(args: TrackArgs) -> Result<()> {
             report
                 .write_csv(dir)
                 .with_context(|| format!("writing logs of {name}"))?;
+            plot_track::write(&report, dir).with_context(|| format!("plotting {name}"))?;
         }
         all.push(report);
     }

@@ -8,6 +8,7 @@ mod cmd_lut;
 mod cmd_model;
 mod cmd_track;
 mod plot;
+mod plot_track;
 
 /// Soft and origami robotics toolkit: physics, LUTs, firmware, simulation.
 #[derive(Parser, Debug)]

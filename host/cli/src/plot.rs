@@ -12,6 +12,8 @@ pub struct Series {
     pub label: String,
     /// Points (x, y).
     pub points: Vec<(f64, f64)>,
+    /// Draw the points as dots (a cloud) instead of joining them.
+    pub dots: bool,
 }
 
 /// A chart with labelled axes.
@@ -91,8 +93,16 @@ impl Chart<'_> {
         let n = self.series.len().max(2) - 1;
         for (i, s) in self.series.iter().enumerate() {
             let c = ViridisRGB::get_color(i as f64 / n as f64);
-            chart
-                .draw_series(LineSeries::new(s.points.iter().copied(), c.stroke_width(2)))
+            let drawn = if s.dots {
+                chart.draw_series(
+                    s.points
+                        .iter()
+                        .map(|&p| Circle::new(p, 2, c.mix(0.6).filled())),
+                )
+            } else {
+                chart.draw_series(LineSeries::new(s.points.iter().copied(), c.stroke_width(2)))
+            };
+            drawn
                 .map_err(err)?
                 .label(s.label.clone())
                 .legend(move |(x, y)| {

@@ -16,6 +16,16 @@ fn track(args: &[&str]) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).expect("one JSON summary")
 }
 
+/// The controllers of a scenario summary, in order.
+fn controllers(r: &serde_json::Value) -> Vec<&str> {
+    r["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x["controller"].as_str().unwrap())
+        .collect()
+}
+
 #[test]
 fn circle_summary_orders_the_controllers_and_is_deterministic() {
     let a = track(&["--short", "--scenario", "circle", "--seed", "7", "--json"]);
@@ -62,6 +72,51 @@ fn logs_and_summary_are_written() {
         "units in the header"
     );
     assert!(text.lines().count() > 10);
+    // Trajectory against reference and error over time, PNG and SVG.
+    for stem in ["triangle_trajectory", "triangle_error"] {
+        for ext in ["png", "svg"] {
+            let p = dir.join(format!("{stem}.{ext}"));
+            let len = std::fs::metadata(&p).map(|m| m.len()).unwrap_or(0);
+            assert!(len > 1000, "{} missing or empty", p.display());
+        }
+    }
+    let svg = std::fs::read_to_string(dir.join("triangle_trajectory.svg")).unwrap();
+    assert!(svg.contains("firmware_cl") && svg.contains("reference"));
+}
+
+#[test]
+fn host_controllers_run_on_request() {
+    let r = track(&["--short", "--scenario", "circle", "--mcu", "host", "--json"]);
+    let runs = controllers(&r);
+    assert_eq!(runs, ["open_loop", "host_pid", "oracle"]);
+}
+
+#[test]
+fn bad_mcu_and_missing_port_are_named() {
+    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
+        .args(["track", "--mcu", "serial", "--scenario", "circle"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("port:PATH"), "{err}");
+    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
+        .args([
+            "track",
+            "--mcu",
+            "port:/dev/ocm-absent",
+            "--scenario",
+            "circle",
+        ])
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("/dev/ocm-absent") && err.contains("serial port"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -93,12 +148,7 @@ fn firmware_in_process_closes_the_loop() {
         cl < 0.5 * ol,
         "firmware closed loop {cl} mm vs open loop {ol} mm"
     );
-    let runs: Vec<&str> = r["runs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x["controller"].as_str().unwrap())
-        .collect();
+    let runs = controllers(&r);
     assert!(
         runs.contains(&"firmware_ol") && runs.contains(&"firmware_cl") && runs.contains(&"oracle"),
         "{runs:?}"

@@ -3,7 +3,7 @@
 #![allow(missing_docs)]
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use ocm_fem::bellows::{Bellows, BellowsConfig, Law};
+use ocm_fem::bellows::{Bellows, BellowsConfig, Law, RigidMode};
 use ocm_fem::material::Material;
 use ocm_fem::mesh::vtk;
 use ocm_fem::model::{Loads, Model, Pattern, State};
@@ -30,46 +30,59 @@ fn bellows(c: &mut Criterion) {
     };
     let mut g = c.benchmark_group("bellows");
     g.sample_size(10);
-    for law in [Law::NeoHookeanBulk, Law::Corotational] {
+    // Rigid parts as true rigid-body constraints (the default), and the stiff penalty for comparison.
+    for (law, rigid, tag) in [
+        (Law::NeoHookeanBulk, RigidMode::Constraint, ""),
+        (Law::Corotational, RigidMode::Constraint, ""),
+        (Law::NeoHookeanBulk, RigidMode::Penalty, "_penalty"),
+    ] {
         let b = Bellows::load(
             &p,
             BellowsConfig {
                 law,
+                rigid,
                 ..BellowsConfig::default()
             },
         )
         .expect("bellows mesh");
         let mut solver = StaticSolver::new(&b.model).expect("solver");
-        g.bench_function(format!("static_20kpa_{law:?}"), |bn| {
+        g.bench_function(format!("static_20kpa_{law:?}{tag}"), |bn| {
             bn.iter(|| b.solve_kpa(&mut solver, &[20.0, 0.0, 10.0]).expect("solve"))
         });
     }
     // One implicit Euler step of 10 ms from a pressurised state with Rayleigh damping (App. E).
-    let b = Bellows::load(
-        &p,
-        BellowsConfig {
-            law: Law::NeoHookeanBulk,
-            ..BellowsConfig::default()
-        },
-    )
-    .expect("mesh");
-    let mut dyn_solver = DynamicSolver::new(&b.model, Integrator::ImplicitEuler).expect("solver");
-    let loads = b.loads_kpa(&[20.0, 0.0, 0.0]);
-    let mut s = State::at_rest(&b.model);
-    dyn_solver
-        .step(&b.model, &mut s, &loads, 0.01)
-        .expect("first step");
-    g.bench_function("implicit_euler_step_10ms", |bn| {
-        bn.iter_batched(
-            || s.clone(),
-            |mut st| {
-                dyn_solver
-                    .step(&b.model, &mut st, &loads, 0.01)
-                    .expect("step")
+    for (rigid, tag) in [
+        (RigidMode::Constraint, ""),
+        (RigidMode::Penalty, "_penalty"),
+    ] {
+        let b = Bellows::load(
+            &p,
+            BellowsConfig {
+                law: Law::NeoHookeanBulk,
+                rigid,
+                ..BellowsConfig::default()
             },
-            criterion::BatchSize::LargeInput,
         )
-    });
+        .expect("mesh");
+        let mut dyn_solver =
+            DynamicSolver::new(&b.model, Integrator::ImplicitEuler).expect("solver");
+        let loads = b.loads_kpa(&[20.0, 0.0, 0.0]);
+        let mut s = State::at_rest(&b.model);
+        dyn_solver
+            .step(&b.model, &mut s, &loads, 0.01)
+            .expect("first step");
+        g.bench_function(format!("implicit_euler_step_10ms{tag}"), |bn| {
+            bn.iter_batched(
+                || s.clone(),
+                |mut st| {
+                    dyn_solver
+                        .step(&b.model, &mut st, &loads, 0.01)
+                        .expect("step")
+                },
+                criterion::BatchSize::LargeInput,
+            )
+        });
+    }
     g.finish();
 }
 

@@ -5,7 +5,9 @@
 //! (on mesh nodes, but only about 60 % of their triangles are tet faces). We drop the tets whose
 //! centroid lies inside a wall, keep the face-connected solid, pressurise the walls as given (so the
 //! cavity volume is the wall's), clamp the bottom face, and make the base connectors and the top
-//! frame rigid (stiff penalty, [`Model::make_rigid`]).
+//! frame rigid: by default as true rigid bodies ([`Model::add_rigid_body`]; the base touches the
+//! clamp and so is clamped whole), or as a stiff penalty ([`Model::make_rigid`]) with
+//! `rigid = "penalty"`.
 
 use crate::material::Material;
 use crate::mesh::{Mesh, surface, vtk};
@@ -28,6 +30,17 @@ pub enum Law {
     NeoHookeanBulk,
 }
 
+/// How the rigid parts (base connectors, top frame) are modelled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum RigidMode {
+    /// Rigid-body constraints: each part moves with six DOFs, exactly rigid.
+    #[default]
+    Constraint,
+    /// Stiff penalty: the parts' elements are `rigid_factor` times stiffer.
+    Penalty,
+}
+
 /// Parameters of the bellows scene (SI units unless the name says mm).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default)]
@@ -42,13 +55,17 @@ pub struct BellowsConfig {
     pub density_kg_m3: f64,
     /// Gravity along -z, m/s^2 (0 disables).
     pub gravity_m_s2: f64,
-    /// Stiffness multiplier of the rigid parts.
+    /// How the rigid parts are modelled.
+    pub rigid: RigidMode,
+    /// Stiffness multiplier of the rigid parts (penalty mode).
     pub rigid_factor: f64,
     /// Nodes with z below this are clamped, mm.
     pub fixed_below_mm: f64,
-    /// Elements entirely below this height are rigid (base connectors), mm.
+    /// Nodes (constraint) or elements entirely (penalty) below this height are rigid (base
+    /// connectors), mm.
     pub rigid_base_below_mm: f64,
-    /// Elements entirely above this height are rigid (top frame), mm.
+    /// Nodes (constraint) or elements entirely (penalty) above this height are rigid (top
+    /// frame), mm.
     pub rigid_top_above_mm: f64,
     /// Tool-centre point above the top face along the plate normal, mm.
     pub tcp_offset_mm: f64,
@@ -66,6 +83,7 @@ impl Default for BellowsConfig {
             law: Law::Corotational,
             density_kg_m3: 1040.0,
             gravity_m_s2: 0.0,
+            rigid: RigidMode::Constraint,
             rigid_factor: 100.0,
             fixed_below_mm: 0.5,
             rigid_base_below_mm: 15.0,
@@ -101,6 +119,8 @@ pub struct Bellows {
     pub top_face: Vec<usize>,
     /// Nodes of the rigid top frame (for the plate orientation).
     pub top_frame: Vec<usize>,
+    /// The top frame's rigid body in [`Model::rigid_bodies`] (constraint mode).
+    pub top_body: Option<usize>,
     /// Centre of the clamped base, m.
     pub base_center: Vector3<f64>,
     /// Chamber centre angles about z, degrees (chamber order).
@@ -220,8 +240,17 @@ impl Bellows {
             config.rigid_base_below_mm * 1e-3,
             config.rigid_top_above_mm * 1e-3,
         );
-        model.make_rigid(|p| p.z <= zb, config.rigid_factor);
-        model.make_rigid(|p| p.z >= zt, config.rigid_factor);
+        let top_body = match config.rigid {
+            RigidMode::Penalty => {
+                model.make_rigid(|p| p.z <= zb, config.rigid_factor);
+                model.make_rigid(|p| p.z >= zt, config.rigid_factor);
+                None
+            }
+            RigidMode::Constraint => {
+                model.add_rigid_body("base", |p| p.z <= zb)?;
+                Some(model.add_rigid_body("top", |p| p.z >= zt)?)
+            }
+        };
         let zmax = model
             .rest
             .iter()
@@ -245,6 +274,7 @@ impl Bellows {
             config,
             top_face,
             top_frame,
+            top_body,
             base_center: Vector3::new(base_center.x, base_center.y, 0.0),
             removed_tets: removed,
         })
@@ -260,21 +290,26 @@ impl Bellows {
     /// Reads the Fig 4.3 state from a solved configuration.
     pub fn state_of(&self, s: &State) -> BellowsState {
         let pos = s.positions();
-        let rest = &self.model.rest;
-        // Best-fit rotation of the top frame (Kabsch).
-        let c0 = self
-            .top_frame
-            .iter()
-            .map(|&i| rest[i])
-            .sum::<Vector3<f64>>()
-            / self.top_frame.len() as f64;
-        let c1 = self.top_frame.iter().map(|&i| pos[i]).sum::<Vector3<f64>>()
-            / self.top_frame.len() as f64;
-        let mut h = Matrix3::zeros();
-        for &i in &self.top_frame {
-            h += (pos[i] - c1) * (rest[i] - c0).transpose();
-        }
-        let r = crate::element::polar_rotation(&h);
+        let r = match self.top_body.and_then(|b| s.bodies.get(b)) {
+            Some(body) => body.rotation_matrix(),
+            None => {
+                // Penalty mode: best-fit rotation of the top frame (Kabsch).
+                let rest = &self.model.rest;
+                let c0 = self
+                    .top_frame
+                    .iter()
+                    .map(|&i| rest[i])
+                    .sum::<Vector3<f64>>()
+                    / self.top_frame.len() as f64;
+                let c1 = self.top_frame.iter().map(|&i| pos[i]).sum::<Vector3<f64>>()
+                    / self.top_frame.len() as f64;
+                let mut h = Matrix3::zeros();
+                for &i in &self.top_frame {
+                    h += (pos[i] - c1) * (rest[i] - c0).transpose();
+                }
+                crate::element::polar_rotation(&h)
+            }
+        };
         let rot = Rotation3::from_matrix_unchecked(r);
         let top1 = self.top_face.iter().map(|&i| pos[i]).sum::<Vector3<f64>>()
             / self.top_face.len() as f64;

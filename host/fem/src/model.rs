@@ -1,10 +1,14 @@
-//! The immutable FE model (geometry, material, mass, constraints, cavities) and its evolving state.
+//! The immutable FE model (geometry, material, mass, constraints, rigid bodies, cavities) and its
+//! evolving state.
 
 use crate::element::{self, Mat12, TetGeom};
 use crate::material::Material;
 use crate::mesh::Mesh;
+pub use crate::pattern::{BodyDofs, Pattern};
+use crate::pattern::{ElemKind, NONE};
+pub use crate::rigid::{BodyState, RigidBody};
 use crate::{FemError, Result};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// How the mass matrix is formed from the density.
@@ -39,7 +43,7 @@ impl Cavity {
     }
 }
 
-/// Skew matrix [v]x with [v]x w = v x w.
+/// Skew matrix `[v]x` with `[v]x w = v x w`.
 pub fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
@@ -53,7 +57,8 @@ pub struct Model {
     pub elements: Vec<TetGeom>,
     /// Material law of all elements.
     pub material: Material,
-    /// Stiffness multiplier per element (1 normally; large for rigid parts, see [`Model::make_rigid`]).
+    /// Stiffness multiplier per element (1 normally; large for penalty-rigid parts, see
+    /// [`Model::make_rigid`]).
     pub element_scale: Vec<f64>,
     /// Mass density, kg/m^3.
     pub density_kg_m3: f64,
@@ -73,6 +78,8 @@ pub struct Model {
     pub fixed: Vec<bool>,
     /// Per DOF: prescribed displacement for constrained DOFs, m (scaled by the load factor in statics).
     pub prescribed: Vec<f64>,
+    /// Rigid bodies (master-slave constraints, see [`Model::add_rigid_body`]).
+    pub rigid_bodies: Vec<RigidBody>,
     k0: Vec<Mat12>,
     lumped: Vec<f64>,
 }
@@ -114,6 +121,7 @@ impl Model {
             cavities: vec![],
             fixed: vec![false; 3 * n],
             prescribed: vec![0.0; 3 * n],
+            rigid_bodies: vec![],
             k0: vec![],
             lumped: vec![],
         };
@@ -197,11 +205,13 @@ impl Model {
         self.prescribed[3 * node + dim] = displacement;
     }
 
-    /// Makes a part rigid: every element whose nodes all satisfy `select` is stiffened by `factor`.
+    /// Makes a part nearly rigid: every element whose nodes all satisfy `select` is stiffened by
+    /// `factor`.
     ///
-    /// This is a stiff-penalty rigid-body constraint: the part keeps its shape up to strains of order
-    /// 1/factor while rotating freely (the corotational and hyperelastic laws are objective), and the
-    /// tangent stays exact and symmetric. Returns how many elements were stiffened.
+    /// This is a stiff-penalty alternative to [`Model::add_rigid_body`]: the part keeps its shape up
+    /// to strains of order 1/factor while rotating freely (the corotational and hyperelastic laws
+    /// are objective); large factors make Newton work harder. Returns how many elements were
+    /// stiffened.
     pub fn make_rigid(&mut self, select: impl Fn(&Vector3<f64>) -> bool, factor: f64) -> usize {
         let mut n = 0;
         for (e, g) in self.elements.iter().enumerate() {
@@ -211,6 +221,147 @@ impl Model {
             }
         }
         n
+    }
+
+    /// Makes the nodes whose rest position satisfies `select` one rigid body; returns its index.
+    ///
+    /// The nodes then follow six DOFs exactly (master-slave elimination, see [`crate::rigid`]);
+    /// elements with all nodes on the body carry no strain. A body with a fixed DOF on any node is
+    /// clamped whole at rest when the solvers are built (a prescribed non-zero displacement on it is
+    /// an error there). Errors: no node selected, a node already on another body, or nodes that do
+    /// not fix a rotation (fewer than three, or all on one line).
+    pub fn add_rigid_body(
+        &mut self,
+        name: &str,
+        select: impl Fn(&Vector3<f64>) -> bool,
+    ) -> Result<usize> {
+        let nodes: Vec<usize> = (0..self.rest.len())
+            .filter(|&i| select(&self.rest[i]))
+            .collect();
+        if nodes.is_empty() {
+            return Err(FemError::Model(format!(
+                "rigid body '{name}': no node selected"
+            )));
+        }
+        for other in &self.rigid_bodies {
+            if let Some(i) = nodes.iter().find(|i| other.nodes.binary_search(i).is_ok()) {
+                return Err(FemError::Model(format!(
+                    "rigid body '{name}': node {i} already belongs to rigid body '{}'",
+                    other.name
+                )));
+            }
+        }
+        let mass: f64 = nodes.iter().map(|&i| self.lumped[i]).sum();
+        let center0 = nodes
+            .iter()
+            .map(|&i| self.rest[i] * self.lumped[i])
+            .sum::<Vector3<f64>>()
+            / mass;
+        let offsets: Vec<Vector3<f64>> = nodes.iter().map(|&i| self.rest[i] - center0).collect();
+        // Second moment of the nodes: singular when they lie on a line (a free spin about it).
+        let spread = offsets
+            .iter()
+            .map(|r| r * r.transpose())
+            .sum::<Matrix3<f64>>();
+        let eig = SymmetricEigen::new(spread).eigenvalues;
+        let hi = eig.max();
+        if eig.iter().filter(|&&e| e > 1e-10 * hi).count() < 2 {
+            return Err(FemError::Model(format!(
+                "rigid body '{name}': its {} nodes lie on a line or at a point and leave a rotation free",
+                nodes.len()
+            )));
+        }
+        self.rigid_bodies.push(RigidBody {
+            name: name.to_string(),
+            nodes,
+            offsets,
+            center0,
+            mass_kg: mass,
+        });
+        Ok(self.rigid_bodies.len() - 1)
+    }
+
+    /// Writes the slave positions, velocities and accelerations of every rigid body into `state`
+    /// from its body states (x_i = c + R (X_i - C0), v_i = v_c + w x r_i,
+    /// a_i = a_c + alpha x r_i + w x (w x r_i)).
+    pub fn place_bodies(&self, state: &mut State) -> Result<()> {
+        self.check_bodies(state)?;
+        for (body, bs) in self.rigid_bodies.iter().zip(&state.bodies) {
+            let rot = bs.rotation_matrix();
+            let (w, al) = (bs.angular_velocity, bs.angular_acceleration);
+            let home = bs.is_home(body);
+            for (&i, off) in body.nodes.iter().zip(&body.offsets) {
+                let r = rot * off;
+                let x = if home { self.rest[i] } else { bs.center + r };
+                let v = bs.velocity + w.cross(&r);
+                let a = bs.acceleration + al.cross(&r) + w.cross(&w.cross(&r));
+                for d in 0..3 {
+                    state.x[3 * i + d] = x[d];
+                    state.v[3 * i + d] = v[d];
+                    state.a[3 * i + d] = a[d];
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes the slave positions of every rigid body into `x` from `bodies`.
+    pub(crate) fn place_positions(&self, x: &mut [f64], bodies: &[BodyState]) {
+        for (body, bs) in self.rigid_bodies.iter().zip(bodies) {
+            let rot = bs.rotation_matrix();
+            let home = bs.is_home(body);
+            for (&i, off) in body.nodes.iter().zip(&body.offsets) {
+                let p = if home {
+                    self.rest[i]
+                } else {
+                    bs.center + rot * off
+                };
+                x[3 * i..3 * i + 3].copy_from_slice(p.as_slice());
+            }
+        }
+    }
+
+    /// Moves `x` and `bodies` by `alpha` times the reduced increment `dq` (free node DOFs add,
+    /// bodies translate and turn, R <- exp(alpha dtheta) R) and places the slaves.
+    pub(crate) fn apply_increment(
+        &self,
+        pat: &Pattern,
+        x: &mut [f64],
+        bodies: &mut [BodyState],
+        dq: &[f64],
+        alpha: f64,
+    ) {
+        for (j, &d) in pat.dof_of.iter().enumerate() {
+            x[d] += alpha * dq[j];
+        }
+        for b in &pat.bodies {
+            let f = b.first;
+            let dc = Vector3::new(dq[f], dq[f + 1], dq[f + 2]) * alpha;
+            let dt = Vector3::new(dq[f + 3], dq[f + 4], dq[f + 5]) * alpha;
+            bodies[b.body] = bodies[b.body].moved(dc, dt);
+        }
+        if !pat.bodies.is_empty() {
+            self.place_positions(x, bodies);
+        }
+    }
+
+    /// Errors unless `state` has one body state per rigid body.
+    pub(crate) fn check_bodies(&self, state: &State) -> Result<()> {
+        if state.bodies.len() != self.rigid_bodies.len() {
+            return Err(FemError::Model(format!(
+                "state has {} rigid-body states, model {} rigid bodies (build the state after adding bodies)",
+                state.bodies.len(),
+                self.rigid_bodies.len()
+            )));
+        }
+        Ok(())
+    }
+
+    /// Puts the clamped bodies of `pat` back at rest in `state`.
+    pub(crate) fn rest_clamped(&self, pat: &Pattern, state: &mut State) {
+        for &b in &pat.clamped_bodies {
+            state.bodies[b] = BodyState::at_rest(&self.rigid_bodies[b]);
+        }
     }
 
     /// Adds an open surface loaded by pressure along its triangle normals (right-hand rule), as given.
@@ -278,6 +429,8 @@ pub struct State {
     pub a: Vec<f64>,
     /// Time, s.
     pub t: f64,
+    /// Rigid-body states, one per [`Model::rigid_bodies`] entry.
+    pub bodies: Vec<BodyState>,
 }
 
 impl State {
@@ -290,6 +443,7 @@ impl State {
             v: vec![0.0; n],
             a: vec![0.0; n],
             t: 0.0,
+            bodies: model.rigid_bodies.iter().map(BodyState::at_rest).collect(),
         }
     }
 
@@ -325,143 +479,6 @@ pub struct Loads {
     pub pressures_pa: Vec<f64>,
 }
 
-/// Sparse structure over free DOFs with element-to-value maps.
-#[derive(Debug, Clone)]
-pub struct Pattern {
-    /// DOF -> free index, or usize::MAX when constrained.
-    pub free_of: Vec<usize>,
-    /// Free index -> DOF.
-    pub dof_of: Vec<usize>,
-    /// CSC column pointers (full symmetric pattern).
-    pub col_ptr: Vec<usize>,
-    /// CSC row indices.
-    pub row_idx: Vec<usize>,
-    elem_map: Vec<[u32; 144]>,
-    tri_maps: Vec<Vec<[u32; 81]>>,
-    diag: Vec<usize>,
-}
-
-const NONE: u32 = u32::MAX;
-
-impl Pattern {
-    /// Builds the structure for `model`.
-    pub fn new(model: &Model) -> Result<Self> {
-        let ndof = 3 * model.num_nodes();
-        let mut free_of = vec![usize::MAX; ndof];
-        let mut dof_of = vec![];
-        for d in 0..ndof {
-            if !model.fixed[d] {
-                free_of[d] = dof_of.len();
-                dof_of.push(d);
-            }
-        }
-        let nf = dof_of.len();
-        let mut cols: Vec<Vec<usize>> = vec![vec![]; nf];
-        let mut add_clique = |nodes: &[usize]| {
-            for &a in nodes {
-                for &b in nodes {
-                    for i in 0..3 {
-                        for k in 0..3 {
-                            let (r, c) = (free_of[3 * a + i], free_of[3 * b + k]);
-                            if r != usize::MAX && c != usize::MAX {
-                                cols[c].push(r);
-                            }
-                        }
-                    }
-                }
-            }
-        };
-        for g in &model.elements {
-            add_clique(&g.nodes);
-        }
-        for c in &model.cavities {
-            for t in &c.triangles {
-                add_clique(t);
-            }
-        }
-        let mut col_ptr = vec![0usize];
-        let mut row_idx = vec![];
-        for (j, col) in cols.iter_mut().enumerate() {
-            col.push(j);
-            col.sort_unstable();
-            col.dedup();
-            row_idx.extend_from_slice(col);
-            col_ptr.push(row_idx.len());
-        }
-        if row_idx.len() >= NONE as usize {
-            return Err(FemError::Model(
-                "matrix too large for 32-bit value maps".into(),
-            ));
-        }
-        let find = |r: usize, c: usize| -> u32 {
-            if r == usize::MAX || c == usize::MAX {
-                return NONE;
-            }
-            let s = &row_idx[col_ptr[c]..col_ptr[c + 1]];
-            match s.binary_search(&r) {
-                Ok(k) => (col_ptr[c] + k) as u32,
-                Err(_) => NONE,
-            }
-        };
-        let map_nodes = |nodes: &[usize], out: &mut [u32]| {
-            let m = nodes.len() * 3;
-            for (a, &na) in nodes.iter().enumerate() {
-                for (b, &nb) in nodes.iter().enumerate() {
-                    for i in 0..3 {
-                        for k in 0..3 {
-                            out[(3 * a + i) * m + 3 * b + k] =
-                                find(free_of[3 * na + i], free_of[3 * nb + k]);
-                        }
-                    }
-                }
-            }
-        };
-        let elem_map = model
-            .elements
-            .iter()
-            .map(|g| {
-                let mut m = [NONE; 144];
-                map_nodes(&g.nodes, &mut m);
-                m
-            })
-            .collect();
-        let tri_maps = model
-            .cavities
-            .iter()
-            .map(|c| {
-                c.triangles
-                    .iter()
-                    .map(|t| {
-                        let mut m = [NONE; 81];
-                        map_nodes(t, &mut m);
-                        m
-                    })
-                    .collect()
-            })
-            .collect();
-        let diag = (0..nf).map(|j| find(j, j) as usize).collect();
-        Ok(Pattern {
-            free_of,
-            dof_of,
-            col_ptr,
-            row_idx,
-            elem_map,
-            tri_maps,
-            diag,
-        })
-    }
-
-    /// Number of free DOFs.
-    pub fn num_free(&self) -> usize {
-        self.dof_of.len()
-    }
-
-    /// Number of stored matrix entries.
-    pub fn nnz(&self) -> usize {
-        self.row_idx.len()
-    }
-}
-
 /// Result of evaluating the model at a configuration.
 #[derive(Debug, Clone)]
 pub struct Evaluation {
@@ -473,7 +490,11 @@ pub struct Evaluation {
     pub f_int: Vec<f64>,
     /// External force f_ext, full DOF vector, N.
     pub f_ext: Vec<f64>,
-    /// Tangent K_int - dF_ext/dx over free DOFs, CSC values (when asked for).
+    /// Residual f_int - f_ext on the reduced DOFs (free node DOFs, then per rigid body the
+    /// resultant force, N, and moment about its reference point, N m).
+    pub residual: Vec<f64>,
+    /// Tangent K_int - dF_ext/dx on the reduced DOFs (T^T K T plus the symmetric rotation term
+    /// of the rigid bodies), CSC values (when asked for).
     pub tangent: Option<Vec<f64>>,
     /// Cavity volumes, m^3.
     pub cavity_volumes: Vec<f64>,
@@ -519,12 +540,23 @@ impl Model {
             .chunks_exact(3)
             .map(|c| Vector3::new(c[0], c[1], c[2]))
             .collect();
+        if pat.elem_kind.len() != self.elements.len() || pat.node_body.len() != self.num_nodes() {
+            return Err(FemError::Model(
+                "pattern was built for another model".into(),
+            ));
+        }
         let ndof = x.len();
+        let centers = pat.body_centers(x);
         let mut f_int = vec![0.0; ndof];
         let mut k_vals = want_tangent.then(|| vec![0.0; pat.nnz()]);
         let mut energy = 0.0;
         let mut min_j = f64::INFINITY;
+        let mut local = [0.0f64; 144];
         for (e, g) in self.elements.iter().enumerate() {
+            // An element on one rigid body moves rigidly: no strain, no force, nothing to reduce.
+            if let ElemKind::Inside(_) = pat.elem_kind[e] {
+                continue;
+            }
             let ev = element::evaluate(
                 e,
                 g,
@@ -541,7 +573,18 @@ impl Model {
                     f_int[3 * g.nodes[a] + i] += ev.force[3 * a + i];
                 }
             }
-            if let (Some(kv), Some(ke)) = (k_vals.as_mut(), ev.stiffness.as_ref()) {
+            if let (Some(kv), Some(ke), ElemKind::Coupled(ci)) =
+                (k_vals.as_mut(), ev.stiffness.as_ref(), pat.elem_kind[e])
+            {
+                let c = &pat.couplings[ci as usize];
+                for r in 0..12 {
+                    for cc in 0..12 {
+                        local[r * 12 + cc] = ke[(r, cc)];
+                    }
+                }
+                let arms = pat.arms(c, &g.nodes, &pos, &centers);
+                pat.add_coupled(c, &local, &arms, kv);
+            } else if let (Some(kv), Some(ke)) = (k_vals.as_mut(), ev.stiffness.as_ref()) {
                 let map = &pat.elem_map[e];
                 for r in 0..12 {
                     for c in 0..12 {
@@ -584,7 +627,22 @@ impl Model {
                         f_ext[3 * node + d] += p * n_area[d] / 3.0;
                     }
                 }
-                if let Some(kv) = k_vals.as_mut() {
+                let coupled = pat.tri_coupled[ci][ti];
+                if let (Some(kv), true) = (k_vals.as_mut(), coupled != NONE) {
+                    let c = &pat.couplings[coupled as usize];
+                    for m in 0..3 {
+                        let dn = skew(&(pts[(m + 2) % 3] - pts[(m + 1) % 3])) * 0.5;
+                        for n in 0..3 {
+                            for i in 0..3 {
+                                for kk in 0..3 {
+                                    local[(3 * n + i) * 9 + 3 * m + kk] = -p / 3.0 * dn[(i, kk)];
+                                }
+                            }
+                        }
+                    }
+                    let arms = pat.arms(c, t, &pos, &centers);
+                    pat.add_coupled(c, &local[..81], &arms, kv);
+                } else if let Some(kv) = k_vals.as_mut() {
                     // dN/dx_a = [x_c - x_b]x / 2 (cyclic); every row node gets -p/3 of it.
                     let map = &pat.tri_maps[ci][ti];
                     for m in 0..3 {
@@ -603,7 +661,33 @@ impl Model {
                 }
             }
         }
+        let net: Vec<f64> = f_int.iter().zip(&f_ext).map(|(a, b)| a - b).collect();
+        if let Some(kv) = k_vals.as_mut() {
+            // Rotating a body turns the arms of its nodal forces f_i = (f_int - f_ext)_i: the moment
+            // sum r_i x f_i changes by sum (r_i f_i^T - (f_i . r_i) I) dtheta. Its symmetric part is
+            // the Hessian of the potential under R <- exp(dtheta) R and the whole term at
+            // equilibrium (the skew rest is -[m]x / 2, m the body's residual moment).
+            for (b, c) in pat.bodies.iter().zip(&centers) {
+                let mut geo = Matrix3::zeros();
+                for &i in &b.nodes {
+                    let f = Vector3::new(net[3 * i], net[3 * i + 1], net[3 * i + 2]);
+                    let r = pos[i] - c;
+                    geo += 0.5 * (r * f.transpose() + f * r.transpose())
+                        - Matrix3::identity() * f.dot(&r);
+                }
+                for i in 0..3 {
+                    for k in 0..3 {
+                        let slot = b.block[(3 + i) * 6 + 3 + k];
+                        if slot != NONE {
+                            kv[slot as usize] += geo[(i, k)];
+                        }
+                    }
+                }
+            }
+        }
+        let residual = pat.reduce(x, &net);
         Ok(Evaluation {
+            residual,
             strain_energy: energy,
             load_potential: potential,
             f_int,
@@ -614,18 +698,69 @@ impl Model {
         })
     }
 
-    /// Mass matrix values on `pat` (lumped or consistent), free DOFs only.
+    /// Reduced mass matrix values T^T M T on `pat` (lumped or consistent) with the bodies at rest.
     pub fn mass_values(&self, pat: &Pattern) -> Vec<f64> {
+        self.mass_values_at(pat, &self.rest_dofs())
+    }
+
+    /// Reduced mass matrix values T^T M T on `pat` at positions `x` (a rigid body's inertia turns
+    /// with it).
+    pub fn mass_values_at(&self, pat: &Pattern, x: &[f64]) -> Vec<f64> {
         let mut m = vec![0.0; pat.nnz()];
+        let pos: Vec<Vector3<f64>> = x
+            .chunks_exact(3)
+            .map(|c| Vector3::new(c[0], c[1], c[2]))
+            .collect();
+        let centers = pat.body_centers(x);
         match self.mass_kind {
             MassKind::Lumped => {
                 for (j, &d) in pat.dof_of.iter().enumerate() {
                     m[pat.diag[j]] += self.lumped[d / 3];
                 }
+                // sum m_i T_i^T T_i with T_i = [I, -[r_i]x].
+                for (b, c) in pat.bodies.iter().zip(&centers) {
+                    let mut blk = nalgebra::Matrix6::<f64>::zeros();
+                    for &i in &b.nodes {
+                        let mi = self.lumped[i];
+                        let rx = skew(&(pos[i] - c));
+                        let mut t = nalgebra::Matrix3x6::<f64>::zeros();
+                        t.fixed_view_mut::<3, 3>(0, 0)
+                            .copy_from(&Matrix3::identity());
+                        t.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-rx));
+                        blk += t.transpose() * t * mi;
+                    }
+                    for p in 0..36 {
+                        if b.block[p] != NONE {
+                            m[b.block[p] as usize] += blk[(p / 6, p % 6)];
+                        }
+                    }
+                }
             }
             MassKind::Consistent => {
+                let mut local = [0.0f64; 144];
                 for (e, g) in self.elements.iter().enumerate() {
                     let c = self.density_kg_m3 * g.volume / 20.0;
+                    let ci = match pat.elem_kind[e] {
+                        ElemKind::Plain => None,
+                        ElemKind::Coupled(ci) => Some(ci),
+                        ElemKind::Inside(ci) if ci != NONE => Some(ci),
+                        ElemKind::Inside(_) => continue,
+                    };
+                    if let Some(ci) = ci {
+                        local.fill(0.0);
+                        for a in 0..4 {
+                            for b in 0..4 {
+                                let v = if a == b { 2.0 * c } else { c };
+                                for i in 0..3 {
+                                    local[(3 * a + i) * 12 + 3 * b + i] = v;
+                                }
+                            }
+                        }
+                        let cp = &pat.couplings[ci as usize];
+                        let arms = pat.arms(cp, &g.nodes, &pos, &centers);
+                        pat.add_coupled(cp, &local, &arms, &mut m);
+                        continue;
+                    }
                     let map = &pat.elem_map[e];
                     for a in 0..4 {
                         for b in 0..4 {

@@ -14,8 +14,9 @@
 //! [static]
 //! gravity_m_s2 = [0, 0, -9.81]
 //! ```
-//! or, for the bellows manipulator, `[bellows]` (see [`crate::bellows::BellowsConfig`]) with
-//! `pressures_kpa = [[10, 0, 0], ...]`. A `[dynamic]` table (dt_s, steps, integrator) runs
+//! or, for the bellows manipulator, `[bellows]` (see [`crate::bellows::BellowsConfig`]; its
+//! `rigid = "constraint" | "penalty"` picks rigid bodies or stiffened elements for the rigid parts)
+//! with `pressures_kpa = [[10, 0, 0], ...]`. A `[dynamic]` table (dt_s, steps, integrator) runs
 //! implicit dynamics of the last static load from rest instead.
 
 use crate::bellows::{Bellows, BellowsConfig, Law};
@@ -308,6 +309,23 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("bogus"), "{e}");
+    }
+
+    #[test]
+    fn bellows_rigid_mode_is_read_and_checked() {
+        let text = "mesh = \"m.vtk\"\nlength_unit = \"mm\"\n[bellows]\n";
+        let s = Scene::from_toml(text).unwrap();
+        assert_eq!(
+            s.bellows.unwrap().rigid,
+            crate::bellows::RigidMode::Constraint,
+            "rigid bodies by default"
+        );
+        let s = Scene::from_toml(&format!("{text}rigid = \"penalty\"\n")).unwrap();
+        assert_eq!(s.bellows.unwrap().rigid, crate::bellows::RigidMode::Penalty);
+        let e = Scene::from_toml(&format!("{text}rigid = \"glue\"\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 4") && e.contains("glue"), "{e}");
     }
 
     #[test]

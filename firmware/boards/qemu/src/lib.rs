@@ -19,8 +19,18 @@ const DATA: usize = 0x000;
 const STATE: usize = 0x004;
 const CTRL: usize = 0x008;
 const BAUDDIV: usize = 0x010;
+const INTCLEAR: usize = 0x00C;
 const TX_FULL: u32 = 1 << 0;
 const RX_FULL: u32 = 1 << 1;
+/// CTRL: transmitter, receiver and receive interrupt enabled.
+const CTRL_TX_RX_RXINT: u32 = 0b1011;
+/// CMSDK APB timer 0: wakes the core every millisecond.
+const TIMER0: usize = 0x4000_0000;
+/// Interrupt numbers on mps2-an386: UART0 receive and timer 0.
+const IRQ_UART0_RX: u32 = 0;
+const IRQ_TIMER0: u32 = 8;
+/// NVIC interrupt set-enable register 0.
+const NVIC_ISER0: usize = 0xE000_E100;
 
 fn reg(offset: usize) -> *mut u32 {
     (UART0 + offset) as *mut u32
@@ -36,9 +46,14 @@ impl Uart {
         // only owner (constructed once in `QemuBoard::new`).
         unsafe {
             reg(BAUDDIV).write_volatile(16);
-            reg(CTRL).write_volatile(0b11);
+            reg(CTRL).write_volatile(CTRL_TX_RX_RXINT);
         }
         Uart(())
+    }
+
+    /// Whether a received byte waits in the data register.
+    pub fn rx_ready(&self) -> bool {
+        self.state() & RX_FULL != 0
     }
 
     fn state(&self) -> u32 {
@@ -161,10 +176,55 @@ pub struct QemuBoard {
 impl QemuBoard {
     /// Takes the UART and SysTick.
     pub fn new(syst: SYST) -> Self {
-        Self {
+        let me = Self {
             uart: Uart::new(),
             clock: Cycles::new(syst),
-        }
+        };
+        enable_wakeups();
+        me
+    }
+}
+
+/// Acknowledges the wake-up interrupts (UART0 receive, timer 0); the main
+/// loop does the work. Call from the interrupt handler.
+pub fn acknowledge_interrupts() {
+    // SAFETY: write-one-to-clear registers of UART0 and timer 0; clearing
+    // an interrupt that is not pending has no effect.
+    unsafe {
+        reg(INTCLEAR).write_volatile(RX_FULL);
+        ((TIMER0 + 0x00C) as *mut u32).write_volatile(1);
+    }
+}
+
+/// Starts timer 0 at 1 kHz and enables the UART0 receive and timer 0
+/// interrupts, so that [`QemuBoard::idle`] can sleep.
+fn enable_wakeups() {
+    // SAFETY: CMSDK timer 0 (CTRL, RELOAD, VALUE) and NVIC set-enable
+    // registers of the mps2-an386 memory map; nothing else uses them.
+    unsafe {
+        let t = TIMER0 as *mut u32;
+        t.add(2).write_volatile(CORE_HZ / 1_000);
+        t.add(1).write_volatile(CORE_HZ / 1_000);
+        // Enable, interrupt enable.
+        t.write_volatile(0b1001);
+        (NVIC_ISER0 as *mut u32).write_volatile((1 << IRQ_UART0_RX) | (1 << IRQ_TIMER0));
+    }
+}
+
+impl QemuBoard {
+    /// Sleeps until a byte arrives or the millisecond timer fires.
+    ///
+    /// Why: polling the UART state register in a tight loop makes every
+    /// read a device access that QEMU serializes with its I/O thread, which
+    /// then delivers received bytes slowly; a sleeping core leaves it free.
+    /// Interrupts are masked around the check so a byte landing between the
+    /// check and the WFI still wakes the core.
+    pub fn idle(&mut self) {
+        cortex_m::interrupt::free(|_| {
+            if !self.uart.rx_ready() {
+                cortex_m::asm::wfi();
+            }
+        });
     }
 }
 

@@ -4,8 +4,8 @@
 
 use core::ptr::addr_of_mut;
 
-use cortex_m_rt::entry;
-use ocm_board_qemu::{LUT_CAPACITY, QemuBoard};
+use cortex_m_rt::{entry, exception};
+use ocm_board_qemu::{LUT_CAPACITY, QemuBoard, acknowledge_interrupts};
 use ocm_firmware::app::{App, AppConfig};
 use panic_halt as _;
 
@@ -24,5 +24,12 @@ fn main() -> ! {
     let mut app = App::new(buf, AppConfig::default());
     loop {
         app.poll(&mut board);
+        board.idle();
     }
+}
+
+/// Every device interrupt only wakes the core.
+#[exception]
+unsafe fn DefaultHandler(_irqn: i16) {
+    acknowledge_interrupts();
 }

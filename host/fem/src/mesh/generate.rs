@@ -2,7 +2,7 @@
 
 use super::Mesh;
 
-/// Box [0,lx]x[0,ly]x[0,lz] with nx*ny*nz hexes, each split into 6 tets along its main diagonal
+/// Box `[0,lx]x[0,ly]x[0,lz]` with nx*ny*nz hexes, each split into 6 tets along its main diagonal
 /// (Kuhn split: conforming across hexes).
 pub fn box_mesh(n: [usize; 3], size: [f64; 3]) -> Mesh {
     mapped_block(n, |u| [u[0] * size[0], u[1] * size[1], u[2] * size[2]])

@@ -578,7 +578,7 @@ pub fn write_path(
     })
 }
 
-/// Reads the point and cell fields written by [`write`] (binary or ASCII), by name.
+/// Reads the point and cell fields written by [`write()`] (binary or ASCII), by name.
 /// Returns (name, components, values) for every SCALARS/VECTORS section, point data first.
 pub fn read_fields(bytes: &[u8]) -> Result<Vec<(String, usize, Vec<f64>)>> {
     let mesh_end = find(bytes, b"POINT_DATA").or_else(|| find(bytes, b"CELL_DATA"));

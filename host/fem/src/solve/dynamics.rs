@@ -2,8 +2,10 @@
 
 use super::linear::SparseSolver;
 use super::{NewtonOptions, norm, spmv};
-use crate::model::{Loads, Model, Pattern, State};
+use crate::model::{BodyState, Loads, Model, Pattern, State};
+use crate::rigid::log_rotation;
 use crate::{FemError, Result};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 /// Time integrator.
@@ -64,6 +66,13 @@ fn factorize_jacobian(
 }
 
 /// Dynamic solver with cached structure, mass and symbolic factorization.
+///
+/// Rigid bodies move in reduced coordinates: the Newmark (or Euler) formulas act on the reference
+/// point and, for the rotation, on the spatial incremental rotation vector
+/// Theta = log(R_{n+1} R_n^T) with the angular velocity and acceleration in place of v and a
+/// (a Lie-group Newmark, second order). The residual is T^T (M a + f_int - f_ext) + D_r qdot with
+/// the exact slave accelerations a_i = a_c + alpha x r_i + w x (w x r_i); the iteration matrix
+/// drops the gyroscopic terms, which modified Newton tolerates.
 #[derive(Debug, Clone)]
 pub struct DynamicSolver {
     /// Sparse structure.
@@ -78,6 +87,33 @@ pub struct DynamicSolver {
     /// (ca, cv) of the iteration matrix whose factor `linear` holds, if any: later steps of the
     /// same size start their modified Newton from it.
     factor_coeffs: Option<(f64, f64)>,
+}
+
+/// Acceleration and velocity at the end of a step of length `h` from the increment `dx` and the
+/// start values `v0`, `a0` (per component; also for rotation vectors).
+fn kinematics(integrator: Integrator, h: f64, dx: f64, v0: f64, a0: f64) -> (f64, f64) {
+    match integrator {
+        Integrator::ImplicitEuler => (dx / (h * h) - v0 / h, dx / h),
+        Integrator::Newmark { beta, gamma } => {
+            let a = dx / (beta * h * h) - v0 / (beta * h) - (0.5 / beta - 1.0) * a0;
+            (a, v0 + h * ((1.0 - gamma) * a0 + gamma * a))
+        }
+    }
+}
+
+/// Vector form of [`kinematics`].
+fn kinematics3(
+    integrator: Integrator,
+    h: f64,
+    dx: Vector3<f64>,
+    v0: Vector3<f64>,
+    a0: Vector3<f64>,
+) -> (Vector3<f64>, Vector3<f64>) {
+    let mut out = (Vector3::zeros(), Vector3::zeros());
+    for k in 0..3 {
+        (out.0[k], out.1[k]) = kinematics(integrator, h, dx[k], v0[k], a0[k]);
+    }
+    out
 }
 
 impl DynamicSolver {
@@ -108,14 +144,19 @@ impl DynamicSolver {
         })
     }
 
-    /// Kinetic energy 1/2 v^T M v, J.
+    /// Kinetic energy 1/2 v^T M v, J (slave velocities are those of their bodies).
     pub fn kinetic_energy(model: &Model, state: &State) -> f64 {
         let mv = model.mass_times(&state.v);
         0.5 * mv.iter().zip(&state.v).map(|(a, b)| a * b).sum::<f64>()
     }
 
-    fn free(&self, full: &[f64]) -> Vec<f64> {
-        self.pattern.dof_of.iter().map(|&d| full[d]).collect()
+    /// Reduced mass matrix at positions `x` (constant without rigid bodies).
+    fn mass_at(&self, model: &Model, x: &[f64]) -> Vec<f64> {
+        if self.pattern.bodies.is_empty() {
+            self.mass.clone()
+        } else {
+            model.mass_values_at(&self.pattern, x)
+        }
     }
 
     /// Advances `state` by `dt` seconds; halves the step (up to the minimum fraction) on failure.
@@ -129,7 +170,16 @@ impl DynamicSolver {
         if !(dt > 0.0 && dt.is_finite()) {
             return Err(FemError::Model(format!("time step {dt} must be positive")));
         }
+        model.check_bodies(state)?;
+        if state.x.len() != 3 * model.num_nodes()
+            || state.v.len() != state.x.len()
+            || state.a.len() != state.x.len()
+        {
+            return Err(FemError::Model("state does not match the model".into()));
+        }
         if !self.initialized {
+            model.rest_clamped(&self.pattern, state);
+            model.place_bodies(state)?;
             self.initial_acceleration(model, state, loads)?;
             self.initialized = true;
         }
@@ -168,41 +218,56 @@ impl DynamicSolver {
         Ok(rep)
     }
 
-    /// a0 = M^-1 (f_ext - f_int - D v0) so that Newmark starts consistently.
+    /// a0 = M^-1 (f_ext - f_int - D v0) (reduced, with the bodies' centripetal terms) so that
+    /// Newmark starts consistently.
     fn initial_acceleration(
         &mut self,
         model: &Model,
         state: &mut State,
         loads: &Loads,
     ) -> Result<()> {
-        let ev = model.evaluate(&self.pattern, &state.x, loads, 1.0, true)?;
+        let pat = &self.pattern;
+        let ev = model.evaluate(pat, &state.x, loads, 1.0, true)?;
         let k = ev
             .tangent
             .as_ref()
             .ok_or_else(|| FemError::Linear("tangent missing".into()))?;
-        let vf = self.free(&state.v);
-        let mv = spmv(&self.pattern, &self.mass, &vf);
-        let kv = spmv(&self.pattern, k, &vf);
-        let mut rhs: Vec<f64> = self
-            .pattern
-            .dof_of
-            .iter()
-            .enumerate()
-            .map(|(j, &d)| {
-                ev.f_ext[d]
-                    - ev.f_int[d]
+        let mass = self.mass_at(model, &state.x);
+        let vr = pat.reduced_velocity(state);
+        let mv = spmv(pat, &mass, &vr);
+        let kv = spmv(pat, k, &vr);
+        // Inertia of the body spin alone: slave accelerations w x (w x r_i).
+        let mut a_spin = vec![0.0; state.x.len()];
+        for (b, c) in pat.bodies.iter().zip(pat.body_centers(&state.x)) {
+            let w = state.bodies[b.body].angular_velocity;
+            for &i in &b.nodes {
+                let r = Vector3::new(state.x[3 * i], state.x[3 * i + 1], state.x[3 * i + 2]) - c;
+                let a = w.cross(&w.cross(&r));
+                a_spin[3 * i..3 * i + 3].copy_from_slice(a.as_slice());
+            }
+        }
+        let spin = pat.reduce(&state.x, &model.mass_times(&a_spin));
+        let mut rhs: Vec<f64> = (0..pat.num_free())
+            .map(|j| {
+                -ev.residual[j]
+                    - spin[j]
                     - model.rayleigh_alpha * mv[j]
                     - model.rayleigh_beta * kv[j]
             })
             .collect();
-        let m = self.mass.clone();
         self.factor_coeffs = None;
-        self.linear.solve(&m, &mut rhs)?;
+        self.linear.solve(&mass, &mut rhs)?;
         state.a = vec![0.0; state.x.len()];
-        for (j, &d) in self.pattern.dof_of.iter().enumerate() {
+        for (j, &d) in pat.dof_of.iter().enumerate() {
             state.a[d] = rhs[j];
         }
-        Ok(())
+        for b in &pat.bodies {
+            let f = b.first;
+            let bs = &mut state.bodies[b.body];
+            bs.acceleration = Vector3::new(rhs[f], rhs[f + 1], rhs[f + 2]);
+            bs.angular_acceleration = Vector3::new(rhs[f + 3], rhs[f + 4], rhs[f + 5]);
+        }
+        model.place_bodies(state)
     }
 
     fn substep(
@@ -213,54 +278,82 @@ impl DynamicSolver {
         h: f64,
         rep: &mut StepReport,
     ) -> Result<()> {
-        let (ca, cv) = match self.integrator {
+        let integrator = self.integrator;
+        let (ca, cv) = match integrator {
             Integrator::ImplicitEuler => (1.0 / (h * h), 1.0 / h),
             Integrator::Newmark { beta, gamma } => (1.0 / (beta * h * h), gamma / (beta * h)),
         };
         let xn = state.x.clone();
         let vn = state.v.clone();
         let an = state.a.clone();
-        let accel_vel = |x: &[f64], d: usize| -> (f64, f64) {
-            let dx = x[d] - xn[d];
-            match self.integrator {
-                Integrator::ImplicitEuler => (dx / (h * h) - vn[d] / h, dx / h),
-                Integrator::Newmark { beta, gamma } => {
-                    let a = dx / (beta * h * h) - vn[d] / (beta * h) - (0.5 / beta - 1.0) * an[d];
-                    (a, vn[d] + h * ((1.0 - gamma) * an[d] + gamma * a))
+        let bn = state.bodies.clone();
+        // Rigid-body end-of-step motion from a trial configuration (bodies moved, velocities and
+        // accelerations filled in from the Lie-group Newmark formulas).
+        let body_motion = |bodies: &[BodyState]| -> Vec<BodyState> {
+            let mut out = bodies.to_vec();
+            for b in &self.pattern.bodies {
+                let (s, s0) = (&mut out[b.body], &bn[b.body]);
+                let dc = s.center - s0.center;
+                let theta = log_rotation(&(s.rotation * s0.rotation.inverse()));
+                (s.acceleration, s.velocity) =
+                    kinematics3(integrator, h, dc, s0.velocity, s0.acceleration);
+                (s.angular_acceleration, s.angular_velocity) = kinematics3(
+                    integrator,
+                    h,
+                    theta,
+                    s0.angular_velocity,
+                    s0.angular_acceleration,
+                );
+            }
+            out
+        };
+        // Full accelerations (free nodes by Newmark, slaves rigid, fixed zero) and reduced
+        // velocities of a trial point.
+        let motion = |x: &[f64], bodies: &[BodyState]| -> (Vec<f64>, Vec<f64>) {
+            let pat = &self.pattern;
+            let mut a = vec![0.0; x.len()];
+            let mut vr = Vec::with_capacity(pat.num_free());
+            for &d in &pat.dof_of {
+                let (ad, vd) = kinematics(integrator, h, x[d] - xn[d], vn[d], an[d]);
+                a[d] = ad;
+                vr.push(vd);
+            }
+            let moved = body_motion(bodies);
+            for b in &pat.bodies {
+                let s = &moved[b.body];
+                vr.extend(s.velocity.iter().chain(s.angular_velocity.iter()));
+                let (w, al) = (s.angular_velocity, s.angular_acceleration);
+                for &i in &b.nodes {
+                    let r = Vector3::new(x[3 * i], x[3 * i + 1], x[3 * i + 2]) - s.center;
+                    let ai = s.acceleration + al.cross(&r) + w.cross(&w.cross(&r));
+                    a[3 * i..3 * i + 3].copy_from_slice(ai.as_slice());
                 }
             }
+            (a, vr)
         };
-        // Rayleigh damping with the stiffness frozen at the start of the step.
+        // Rayleigh damping D = alpha M + beta K with the mass and stiffness frozen at the step start.
         let k_n = model
             .evaluate(&self.pattern, &xn, loads, 1.0, true)?
             .tangent
             .ok_or_else(|| FemError::Linear("tangent missing".into()))?;
-        let damp: Vec<f64> = self
-            .mass
+        let mass = self.mass_at(model, &xn);
+        let damp: Vec<f64> = mass
             .iter()
             .zip(&k_n)
             .map(|(m, k)| model.rayleigh_alpha * m + model.rayleigh_beta * k)
             .collect();
-        let residual = |ev: &crate::model::Evaluation, x: &[f64]| -> (Vec<f64>, f64) {
-            let mut af = Vec::with_capacity(self.pattern.num_free());
-            let mut vf = Vec::with_capacity(self.pattern.num_free());
-            for &d in &self.pattern.dof_of {
-                let (a, v) = accel_vel(x, d);
-                af.push(a);
-                vf.push(v);
-            }
-            let ma = spmv(&self.pattern, &self.mass, &af);
-            let dv = spmv(&self.pattern, &damp, &vf);
-            let r: Vec<f64> = self
-                .pattern
-                .dof_of
-                .iter()
-                .enumerate()
-                .map(|(j, &d)| ma[j] + dv[j] + ev.f_int[d] - ev.f_ext[d])
-                .collect();
-            let scale = norm(&ev.f_int).max(norm(&ev.f_ext)).max(norm(&ma));
-            (r, scale)
-        };
+        let residual =
+            |ev: &crate::model::Evaluation, x: &[f64], bodies: &[BodyState]| -> (Vec<f64>, f64) {
+                let (a, vr) = motion(x, bodies);
+                let ma = model.mass_times(&a);
+                let mut r = self.pattern.reduce(x, &ma);
+                let dv = spmv(&self.pattern, &damp, &vr);
+                for ((rj, dj), ej) in r.iter_mut().zip(&dv).zip(&ev.residual) {
+                    *rj += dj + ej;
+                }
+                let scale = norm(&ev.f_int).max(norm(&ev.f_ext)).max(norm(&ma));
+                (r, scale)
+            };
         let opts = self.options;
         let mut x = xn.clone();
         for d in 0..x.len() {
@@ -268,18 +361,24 @@ impl DynamicSolver {
                 x[d] = model.rest[d / 3][d % 3] + model.prescribed[d];
             }
         }
-        // Predictor: constant velocity.
+        // Predictor: constant velocity (the bodies spin on at their angular velocity).
         for &d in &self.pattern.dof_of {
             x[d] += h * vn[d];
         }
+        let mut bodies = bn.clone();
+        for b in &self.pattern.bodies {
+            let s = bodies[b.body];
+            bodies[b.body] = s.moved(h * s.velocity, h * s.angular_velocity);
+        }
+        model.place_positions(&mut x, &bodies);
         // Modified Newton: the iteration matrix J = ca M + cv D + K is factorized with the tangent
         // at the step start (already needed for the damping) and reused while it contracts the
         // residual fast enough; it is refreshed at the current point when the contraction slows
         // or the line search stalls. The convergence test is that of full Newton, so the solution
         // is the same to within the tolerance, and trial points need no tangent.
         let ev = model.evaluate(&self.pattern, &x, loads, 1.0, false)?;
-        let (mut r, mut scale) = residual(&ev, &x);
-        let mut rn = norm(&r);
+        let (mut r, mut scale) = residual(&ev, &x, &bodies);
+        let mut rn = self.pattern.residual_norm(&r);
         let mut converged = false;
         // None: no factor yet; Some(fresh): a factor exists, fresh when from the current point.
         // The last step's factor (same h) is as good a start as one from K_n and costs nothing.
@@ -292,23 +391,25 @@ impl DynamicSolver {
             }
             rep.iterations += 1;
             if factor.is_none() {
-                factorize_jacobian(&mut self.linear, &self.mass, &k_n, ca, cv, &damp)?;
+                factorize_jacobian(&mut self.linear, &mass, &k_n, ca, cv, &damp)?;
                 rep.factorizations += 1;
                 factor = Some(false);
             }
             let mut dx: Vec<f64> = r.iter().map(|v| -v).collect();
             self.linear.solve_factored(&mut dx)?;
             let pattern = &self.pattern;
-            let x0 = x.clone();
+            let (x0, b0) = (x.clone(), bodies.clone());
             let found = super::line_search(
                 |alpha| {
-                    let mut xt = x0.clone();
-                    for (j, &d) in pattern.dof_of.iter().enumerate() {
-                        xt[d] += alpha * dx[j];
-                    }
+                    let (mut xt, mut bt) = (x0.clone(), b0.clone());
+                    model.apply_increment(pattern, &mut xt, &mut bt, &dx, alpha);
                     let evt = model.evaluate(pattern, &xt, loads, 1.0, false)?;
-                    let (r, scale) = residual(&evt, &xt);
-                    Ok(super::Trial { r, scale, data: xt })
+                    let (r, scale) = residual(&evt, &xt, &bt);
+                    Ok(super::Trial {
+                        r,
+                        scale,
+                        data: (xt, bt),
+                    })
                 },
                 &dx,
                 &r,
@@ -323,13 +424,14 @@ impl DynamicSolver {
                     .evaluate(&self.pattern, &x, loads, 1.0, true)?
                     .tangent
                     .ok_or_else(|| FemError::Linear("tangent missing".into()))?;
-                factorize_jacobian(&mut self.linear, &self.mass, &k, ca, cv, &damp)?;
+                let m = self.mass_at(model, &x);
+                factorize_jacobian(&mut self.linear, &m, &k, ca, cv, &damp)?;
                 rep.factorizations += 1;
                 factor = Some(true);
                 continue;
             };
-            let rn_new = norm(&t.r);
-            x = t.data;
+            let rn_new = self.pattern.residual_norm(&t.r);
+            (x, bodies) = t.data;
             r = t.r;
             scale = t.scale;
             let slow = rn_new > SLOW_CONTRACTION * rn;
@@ -343,7 +445,8 @@ impl DynamicSolver {
                     .evaluate(&self.pattern, &x, loads, 1.0, true)?
                     .tangent
                     .ok_or_else(|| FemError::Linear("tangent missing".into()))?;
-                factorize_jacobian(&mut self.linear, &self.mass, &k, ca, cv, &damp)?;
+                let m = self.mass_at(model, &x);
+                factorize_jacobian(&mut self.linear, &m, &k, ca, cv, &damp)?;
                 rep.factorizations += 1;
                 factor = Some(true);
             } else if factor == Some(true) {
@@ -365,15 +468,14 @@ impl DynamicSolver {
         let mut v = vec![0.0; x.len()];
         let mut a = vec![0.0; x.len()];
         for &d in &self.pattern.dof_of {
-            let (ad, vd) = accel_vel(&x, d);
-            a[d] = ad;
-            v[d] = vd;
+            (a[d], v[d]) = kinematics(integrator, h, x[d] - xn[d], vn[d], an[d]);
         }
         state.x = x;
         state.v = v;
         state.a = a;
+        state.bodies = body_motion(&bodies);
         state.t += h;
-        Ok(())
+        model.place_bodies(state)
     }
 }
 

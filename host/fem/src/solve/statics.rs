@@ -5,6 +5,12 @@ use super::{NewtonOptions, norm};
 use crate::model::{Evaluation, Loads, Model, Pattern, State};
 use crate::{FemError, Result};
 
+/// Line-search steps below this fraction make no real progress...
+const TINY_STEP: f64 = 0.05;
+/// ...and this many in a row mean the load step is too large (an indefinite tangent far from
+/// equilibrium): the step is cut instead of crawling on.
+const STAGNANT_ITERATIONS: usize = 3;
+
 /// What a static solve did.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct StaticReport {
@@ -83,7 +89,7 @@ impl StaticSolver {
         self.solve_path(model, state, from, to, 1.0)
     }
 
-    /// Follows the path s in [0,1]: pressures from -> to, dead loads and prescribed displacements dead0 -> 1.
+    /// Follows the path s in `[0, 1]`: pressures from -> to, dead loads and prescribed displacements dead0 -> 1.
     pub fn solve_path(
         &mut self,
         model: &Model,
@@ -112,7 +118,7 @@ impl StaticSolver {
                     .collect(),
             };
             let dead = dead0 + s_try * (1.0 - dead0);
-            let saved = state.x.clone();
+            let saved = (state.x.clone(), state.bodies.clone());
             match self.newton(model, state, &loads, dead, &mut rep) {
                 Ok(ev) => {
                     s = s_try;
@@ -121,7 +127,7 @@ impl StaticSolver {
                     ds *= 1.5;
                 }
                 Err(e) => {
-                    state.x = saved;
+                    (state.x, state.bodies) = saved;
                     ds *= 0.5;
                     rep.cuts += 1;
                     if ds < self.options.min_step {
@@ -146,15 +152,9 @@ impl StaticSolver {
         Ok(rep)
     }
 
-    fn residual(&self, ev: &Evaluation) -> (Vec<f64>, f64) {
-        let r: Vec<f64> = self
-            .pattern
-            .dof_of
-            .iter()
-            .map(|&d| ev.f_int[d] - ev.f_ext[d])
-            .collect();
+    fn residual(ev: &Evaluation) -> (Vec<f64>, f64) {
         let scale = norm(&ev.f_ext).max(norm(&ev.f_int));
-        (r, scale)
+        (ev.residual.clone(), scale)
     }
 
     /// Newton at fixed loads; returns the converged evaluation.
@@ -166,15 +166,22 @@ impl StaticSolver {
         dead: f64,
         rep: &mut StaticReport,
     ) -> Result<Evaluation> {
+        model.check_bodies(state)?;
+        if state.x.len() != 3 * model.num_nodes() {
+            return Err(FemError::Model("state does not match the model".into()));
+        }
         for d in 0..state.x.len() {
             if model.fixed[d] {
                 state.x[d] = model.rest[d / 3][d % 3] + dead * model.prescribed[d];
             }
         }
+        model.rest_clamped(&self.pattern, state);
+        model.place_positions(&mut state.x, &state.bodies);
         let opts = self.options;
         let mut ev = model.evaluate(&self.pattern, &state.x, loads, dead, true)?;
-        let (mut r, mut scale) = self.residual(&ev);
-        let mut rn = norm(&r);
+        let (mut r, mut scale) = Self::residual(&ev);
+        let mut rn = self.pattern.residual_norm(&r);
+        let mut tiny_steps = 0;
         for _ in 0..opts.max_iterations {
             if rn <= opts.rtol * scale || rn == 0.0 {
                 rep.residual = rn;
@@ -188,25 +195,18 @@ impl StaticSolver {
                 .ok_or_else(|| FemError::Linear("tangent missing".into()))?;
             self.linear.solve(k, &mut dx)?;
             let pattern = &self.pattern;
-            let x0 = state.x.clone();
+            let (x0, b0) = (state.x.clone(), state.bodies.clone());
             let found = super::line_search(
                 |alpha| {
-                    let mut xt = x0.clone();
-                    for (j, &d) in pattern.dof_of.iter().enumerate() {
-                        xt[d] += alpha * dx[j];
-                    }
+                    let (mut xt, mut bt) = (x0.clone(), b0.clone());
+                    model.apply_increment(pattern, &mut xt, &mut bt, &dx, alpha);
                     // Full steps are usually accepted, so they carry their tangent along.
                     let evt = model.evaluate(pattern, &xt, loads, dead, alpha == 1.0)?;
-                    let r: Vec<f64> = pattern
-                        .dof_of
-                        .iter()
-                        .map(|&d| evt.f_int[d] - evt.f_ext[d])
-                        .collect();
-                    let scale = norm(&evt.f_ext).max(norm(&evt.f_int));
+                    let (r, scale) = Self::residual(&evt);
                     Ok(super::Trial {
                         r,
                         scale,
-                        data: (xt, evt),
+                        data: (xt, bt, evt),
                     })
                 },
                 &dx,
@@ -225,19 +225,29 @@ impl StaticSolver {
                     step: 0.0,
                 });
             };
-            let (xt, evt) = t.data;
+            let (xt, bt, evt) = t.data;
             ev = if evt.tangent.is_some() {
                 evt
             } else {
                 model.evaluate(&self.pattern, &xt, loads, dead, true)?
             };
             state.x = xt;
+            state.bodies = bt;
             r = t.r;
             scale = t.scale;
-            rn = norm(&r);
+            rn = self.pattern.residual_norm(&r);
             if alpha * norm(&dx) <= opts.dx_tol {
                 rep.residual = rn;
                 return Ok(ev);
+            }
+            tiny_steps = if alpha < TINY_STEP { tiny_steps + 1 } else { 0 };
+            if tiny_steps >= STAGNANT_ITERATIONS && rn > opts.stall_rtol * scale {
+                return Err(FemError::NoConvergence {
+                    what: "Newton stagnates (tiny line-search steps)".into(),
+                    load_fraction: dead,
+                    residual: rn,
+                    step: alpha,
+                });
             }
         }
         if rn <= opts.stall_rtol * scale {
