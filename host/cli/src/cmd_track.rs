@@ -9,7 +9,7 @@ use anyhow::{Context, Result, bail};
 use ocm_hilsim::firmware::{lut_image, run_scenario_over, run_scenario_with_image};
 use ocm_hilsim::qemu::{QemuLink, build_board};
 use ocm_hilsim::serial::SerialLink;
-use ocm_hilsim::{SCENARIOS, ScenarioReport, SimConfig, run_scenario};
+use ocm_hilsim::{SCENARIOS, ScenarioReport, SimConfig, run_scenario, working_limits};
 
 use crate::plot_track;
 
@@ -59,9 +59,10 @@ pub struct TrackArgs {
     /// Scenario name, or `all`.
     #[arg(long, default_value = "all")]
     scenario: String,
-    /// Seed of every random process (noise, manufacturing spread, targets).
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
+    /// Seed of every random process (noise, manufacturing spread, targets);
+    /// default 1.
+    #[arg(long)]
+    seed: Option<u64>,
     /// Shortened runs (a few seconds each) for a quick look.
     #[arg(long)]
     short: bool,
@@ -88,6 +89,27 @@ pub struct TrackArgs {
     /// energy model for the lab's working pressure range).
     #[arg(long)]
     lut: Option<PathBuf>,
+    /// Lab settings (TOML: plant, effects, sensors, gains, limits; see
+    /// hil-sim/lab.toml); --seed, --short and --duration override it.
+    #[arg(long)]
+    config: Option<PathBuf>,
+}
+
+/// Reads the lab settings from TOML. Command limits the file leaves out
+/// are derived from its plant, not the default one.
+fn read_config(path: &std::path::Path) -> Result<SimConfig> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut cfg: SimConfig =
+        toml::from_str(&text).with_context(|| format!("in {}", path.display()))?;
+    let table: toml::Table =
+        toml::from_str(&text).with_context(|| format!("in {}", path.display()))?;
+    if !table.contains_key("limits") {
+        cfg.limits = working_limits(&cfg.plant);
+    }
+    cfg.validate()
+        .with_context(|| format!("in {}", path.display()))?;
+    Ok(cfg)
 }
 
 /// Where the firmware runs and what it is given.
@@ -130,11 +152,15 @@ pub fn run(args: TrackArgs) -> Result<()> {
             SCENARIOS.join(", ")
         );
     };
+    let base = match &args.config {
+        Some(path) => read_config(path)?,
+        None => SimConfig::default(),
+    };
     let cfg = SimConfig {
-        seed: args.seed,
-        short: args.short,
-        duration_cap_s: args.duration,
-        ..SimConfig::default()
+        seed: args.seed.unwrap_or(base.seed),
+        short: args.short || base.short,
+        duration_cap_s: args.duration.or(base.duration_cap_s),
+        ..base
     };
     let elf = match (&args.mcu, &args.elf) {
         (McuMode::Qemu, Some(e)) => Some(e.clone()),

@@ -159,3 +159,38 @@ fn firmware_in_process_closes_the_loop() {
         }
     }
 }
+
+#[test]
+fn the_example_config_is_the_default_lab_and_bad_keys_are_named() {
+    let lab = concat!(env!("CARGO_MANIFEST_DIR"), "/../../hil-sim/lab.toml");
+    let args = [
+        "--short",
+        "--scenario",
+        "triangle",
+        "--duration",
+        "4",
+        "--json",
+    ];
+    let a = track(&args);
+    let mut with = args.to_vec();
+    with.extend(["--config", lab]);
+    let b = track(&with);
+    for key in ["ol_rmse_mm", "cl_rmse_mm", "oracle_rmse_mm"] {
+        assert_eq!(a[key], b[key], "{key}: lab.toml differs from the defaults");
+    }
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"));
+    let bad = dir.join("bad_lab.toml");
+    std::fs::write(&bad, "[plant.effects]\nstiffness_spred = 0.1\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
+        .args(["track", "--scenario", "circle", "--config"])
+        .arg(&bad)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("stiffness_spred") && err.contains("line 2"),
+        "{err}"
+    );
+}
