@@ -57,9 +57,6 @@ pub fn run(args: IdentArgs) -> anyhow::Result<()> {
     };
     if let Some(name) = &args.synthesize {
         let cause = Cause::from_name(name).with_context(|| format!("unknown cause `{name}`"))?;
-        if kind == Kind::Pose {
-            bail!("synthetic records are made for axial, bending and series kinds");
-        }
         let effects = if cause == Cause::None {
             vec![]
         } else {

@@ -12,6 +12,7 @@ fn bench(c: &mut Criterion) {
     for (kind, cause) in [
         (Kind::Axial, Cause::Hysteresis),
         (Kind::Series, Cause::Latency),
+        (Kind::Pose, Cause::Hysteresis),
     ] {
         let g = generate(&Spec {
             kind,

@@ -7,7 +7,9 @@
 //!   pressure that holds the free cylinder at `strain0` (initial strain set by pressure, as in
 //!   the dissertation's tests), which keeps `M` linear in `(s_b, s_h)`.
 //! - `pose`: the quasi-static segment of [`crate::manipulator`] with one stiffness scale
-//!   (golden-section search on the training rows) and a free z offset (mounting height).
+//!   (golden-section search on the training rows), a free z offset (mounting height) and,
+//!   per channel, the stiffness sensitivity as a free regressor (the scale linearised, so that
+//!   extensions refit it jointly).
 //! - `series`: the static affine map `y = A u + b`; a linear-dynamic reference (inputs plus
 //!   first-order-lagged inputs) is reported beside it.
 
@@ -32,6 +34,15 @@ pub struct Design {
     pub fixed_elastic: Option<Vec<f64>>,
     /// Coefficients constrained to be non-negative (physical stiffness scales).
     pub nonneg: Vec<bool>,
+}
+
+/// Internal states of the pose baseline (see [`Baseline::pose_states`]).
+#[derive(Debug, Clone)]
+pub struct PoseStates {
+    /// Column strains, `[column][row]`.
+    pub strains: Vec<Vec<f64>>,
+    /// `d tip_c / d strain_k`, `[channel][column][row]`, metres.
+    pub sens: Vec<Vec<Vec<f64>>>,
 }
 
 /// A baseline model for one record.
@@ -112,6 +123,41 @@ impl Baseline {
         }
     }
 
+    /// For `pose`: the model's column strains (one row per column) and the sensitivity of
+    /// each tip coordinate to each column strain, `[channel][column][row]`. The memory,
+    /// viscosity and static-mismatch extensions act on these internal strains.
+    pub fn pose_states(&self, inputs: &[&[f64]]) -> Option<PoseStates> {
+        let Baseline::Pose {
+            physics,
+            stiffness_scale,
+        } = self
+        else {
+            return None;
+        };
+        let seg = Segment::new(physics, *stiffness_scale);
+        let n = inputs[0].len();
+        let mut strains = vec![vec![0.0; n]; 3];
+        let mut sens = vec![vec![vec![0.0; n]; 3]; 3];
+        let h = 1e-5;
+        for i in 0..n {
+            let e: [f64; 3] =
+                std::array::from_fn(|k| seg.column_strain(inputs[3][i] / 3.0, inputs[k][i]));
+            for k in 0..3 {
+                strains[k][i] = e[k];
+                let mut a = e;
+                let mut b = e;
+                a[k] += h;
+                b[k] -= h;
+                let ta = seg.tip(seg.configuration(a));
+                let tb = seg.tip(seg.configuration(b));
+                for c in 0..3 {
+                    sens[c][k][i] = (ta[c] - tb[c]) / (2.0 * h);
+                }
+            }
+        }
+        Some(PoseStates { strains, sens })
+    }
+
     /// The design of output `c` on the given input columns.
     pub fn design(&self, inputs: &[&[f64]], time_s: &[f64], starts: &[usize], c: usize) -> Design {
         let n = time_s.len();
@@ -173,15 +219,17 @@ impl Baseline {
                     .zip(&dn)
                     .map(|(a, b)| (a - b) / (2.0 * h))
                     .collect();
-                let (regressors, names, stiffness) = if c == 2 {
-                    (
-                        vec![vec![1.0; n]],
-                        vec!["z offset".to_string()],
-                        vec![false],
-                    )
-                } else {
-                    (Vec::new(), Vec::new(), Vec::new())
-                };
+                // The stiffness scale enters linearised (its sensitivity as a free regressor),
+                // so that extensions are fitted jointly with a stiffness correction; it is not
+                // flagged as a stiffness regressor because `fixed_elastic` already carries it.
+                let mut regressors = vec![el.clone()];
+                let mut names = vec!["relative stiffness correction".to_string()];
+                let mut stiffness = vec![false];
+                if c == 2 {
+                    regressors.push(vec![1.0; n]);
+                    names.push("z offset".to_string());
+                    stiffness.push(false);
+                }
                 Design {
                     fixed,
                     regressors,

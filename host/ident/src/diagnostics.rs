@@ -55,6 +55,21 @@ pub fn variable(prep: &Prepared, cause: Cause, c: usize) -> (Vec<f64>, String) {
     let k = rec.drives.first().copied().unwrap_or(0);
     let u = &rec.inputs[k].values;
     match cause {
+        // pose: memory and viscosity act on the column strains
+        Cause::Hysteresis if prep.pose.is_some() => (
+            prep.pose
+                .as_ref()
+                .map(|p| p.strains[0].clone())
+                .unwrap_or_default(),
+            "model strain of column 1 [-]".into(),
+        ),
+        Cause::RateDependence if prep.pose.is_some() => (
+            prep.pose
+                .as_ref()
+                .map(|p| signal::rate(&p.strains[0], &rec.time_s, &rec.segment_starts))
+                .unwrap_or_default(),
+            "model strain rate of column 1 [1/s]".into(),
+        ),
         Cause::Hysteresis => (
             u.clone(),
             format!("{} [{}]", rec.inputs[k].name, rec.inputs[k].unit),
@@ -90,13 +105,61 @@ pub fn diagnose(prep: &Prepared, c: usize) -> Vec<Diagnostic> {
     let k = rec.drives.first().copied().unwrap_or(0);
     let ch = &prep.channels[c];
     let u = &rec.inputs[k].values;
-    let du = signal::rate(u, &rec.time_s, &rec.segment_starts);
+    // The signed drive rate: positive where the drive loads the structure. For pose the
+    // drives are the three column strains, mapped to this channel by the tip sensitivity (a
+    // lagging strain pulls the tip against `sens * de/dt`); otherwise the first drive, signed
+    // by the mean sensitivity.
+    let du: Vec<f64> = match &prep.pose {
+        Some(ps) => {
+            let mut v = vec![0.0; ch.y.len()];
+            for (e, sens) in ps.strains.iter().zip(&ps.sens[c]) {
+                let de = signal::rate(e, &rec.time_s, &rec.segment_starts);
+                for i in 0..v.len() {
+                    v[i] += sens[i] * de[i];
+                }
+            }
+            v
+        }
+        None => signal::rate(u, &rec.time_s, &rec.segment_starts)
+            .iter()
+            .map(|v| v * ch.sign[k])
+            .collect(),
+    };
+    // Loading direction and speed for the hysteresis split: for pose each moving column adds
+    // its sensitivity times its direction of travel (a play operator's output sits its width
+    // behind the strain, whatever the speed), and the speed is the summed relative strain rate.
+    let (dir, speed): (Vec<f64>, Vec<f64>) = match &prep.pose {
+        Some(ps) => {
+            let n = ch.y.len();
+            let mut dir = vec![0.0; n];
+            let mut speed = vec![0.0; n];
+            for (e, sens) in ps.strains.iter().zip(&ps.sens[c]) {
+                let de = signal::rate(e, &rec.time_s, &rec.segment_starts);
+                let lo = e.iter().copied().fold(f64::INFINITY, f64::min);
+                let hi = e.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                let range = if hi > lo { hi - lo } else { 1.0 };
+                for i in 0..n {
+                    if de[i] != 0.0 {
+                        dir[i] += sens[i] * de[i].signum() * range;
+                        speed[i] += de[i].abs() / range;
+                    }
+                }
+            }
+            (dir, speed)
+        }
+        None => (du.clone(), du.iter().map(|v| v.abs()).collect()),
+    };
+    let drive_name = if prep.pose.is_some() {
+        "column strains".to_string()
+    } else {
+        rec.inputs[k].name.clone()
+    };
     let mut out = Vec::new();
 
     // Hysteresis: loading minus unloading residual at slow rates (rate-independent part).
     let rates: Vec<f64> = rows
         .iter()
-        .map(|&i| du[i].abs())
+        .map(|&i| speed[i])
         .filter(|v| *v > 0.0)
         .collect();
     let mut sorted = rates.clone();
@@ -104,9 +167,9 @@ pub fn diagnose(prep: &Prepared, c: usize) -> Vec<Diagnostic> {
     let slow = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
     let (mut up, mut nu, mut dn, mut nd) = (0.0, 0, 0.0, 0);
     for &i in &rows {
-        let a = du[i].abs();
+        let a = speed[i];
         if a > 0.0 && a <= slow {
-            if du[i] * ch.sign[k] > 0.0 {
+            if dir[i] > 0.0 {
                 up += r_all[i];
                 nu += 1;
             } else {
@@ -120,22 +183,40 @@ pub fn diagnose(prep: &Prepared, c: usize) -> Vec<Diagnostic> {
     } else {
         0.0
     };
+    // With three columns moving at once the loading direction is graded, not binary: pose
+    // reports the residual's correlation with it on the slow rows.
+    let (statistic, value) = if prep.pose.is_some() {
+        let slow_rows: Vec<usize> = rows
+            .iter()
+            .copied()
+            .filter(|&i| speed[i] > 0.0 && speed[i] <= slow)
+            .collect();
+        (
+            "corr(residual, loading direction of the column strains) at slow rates".to_string(),
+            signal::correlation(&pick(&r_all, &slow_rows), &pick(&dir, &slow_rows)),
+        )
+    } else {
+        (
+            "slow loading minus unloading residual / residual RMS".to_string(),
+            split / rms,
+        )
+    };
     out.push(Diagnostic {
         cause: Cause::Hysteresis,
-        statistic: "slow loading minus unloading residual / residual RMS".into(),
-        value: split / rms,
+        statistic,
+        value,
         reading: format!(
-            "loop width {split:.4e} {} at slow rates",
+            "loop width {split:.4e} {} at slow rates of the {drive_name}",
             rec.outputs[c].unit
         ),
     });
 
     // Rate dependence: residual correlation with the signed drive rate, and relaxation in holds.
-    let sdu: Vec<f64> = rows.iter().map(|&i| ch.sign[k] * du[i]).collect();
+    let sdu: Vec<f64> = rows.iter().map(|&i| du[i]).collect();
     let corr = signal::correlation(&r, &sdu);
     out.push(Diagnostic {
         cause: Cause::RateDependence,
-        statistic: "corr(residual, signed drive rate)".into(),
+        statistic: format!("corr(residual, signed rate of the {drive_name})"),
         value: corr,
         reading: if corr > 0.0 {
             "the model under-predicts while loading fast (stiffer when fast)".into()

@@ -3,7 +3,7 @@
 //! inputs, the baseline and causal operators); latency searches a small grid of dead times and
 //! first-order lag constants applied to the baseline's output.
 
-use crate::baseline::{Baseline, Design};
+use crate::baseline::{Baseline, Design, PoseStates};
 use crate::cause::Cause;
 use crate::data::Record;
 use crate::lsq;
@@ -63,6 +63,8 @@ pub struct Prepared<'a> {
     pub means: Vec<f64>,
     /// Latency (dead time in samples, lag in samples) found by the single-cause fit.
     pub latency_hint: std::cell::Cell<Option<(f64, f64)>>,
+    /// Column strains and tip sensitivities of the pose baseline (`None` for other kinds).
+    pub pose: Option<PoseStates>,
 }
 
 /// The fit of a set of extensions.
@@ -166,8 +168,10 @@ impl<'a> Prepared<'a> {
                 sign,
             });
         }
+        let pose = baseline.pose_states(&cols);
         Prepared {
             rec,
+            pose,
             baseline,
             train,
             test,
@@ -223,6 +227,16 @@ impl<'a> Prepared<'a> {
         (path, peak)
     }
 
+    /// Per column of the pose baseline: (column, its strain, channel `c`'s sensitivity to it).
+    fn column_terms(&self, c: usize) -> Vec<(usize, &[f64], &[f64])> {
+        match &self.pose {
+            Some(ps) => (0..ps.strains.len())
+                .map(|k| (k, ps.strains[k].as_slice(), ps.sens[c][k].as_slice()))
+                .collect(),
+            None => Vec::new(),
+        }
+    }
+
     /// Extension features of `cause` for channel `c`: (columns, names, non-negative flags).
     pub fn features(&self, cause: Cause, c: usize) -> Features {
         let rec = self.rec;
@@ -233,6 +247,20 @@ impl<'a> Prepared<'a> {
         let mut nonneg = Vec::new();
         match cause {
             Cause::None | Cause::Latency => {}
+            Cause::Hysteresis if self.pose.is_some() => {
+                // Memory in each column: play operators on the model's column strain, mapped to
+                // the tip by the strain sensitivity; the strain lags (dissipates), so weights
+                // are non-negative on the negated sensitivity.
+                for (k, e, sens) in self.column_terms(c) {
+                    let range = span(e);
+                    for &w in &PLAY_WIDTHS {
+                        let p = signal::play(e, &rec.segment_starts, w * range);
+                        cols.push((0..n).map(|i| -sens[i] * (e[i] - p[i])).collect());
+                        names.push(format!("PI weight column {} r={:.4}", k + 1, w * range));
+                        nonneg.push(true);
+                    }
+                }
+            }
             Cause::Hysteresis => {
                 for &k in &rec.drives {
                     let u = &rec.inputs[k].values;
@@ -241,6 +269,17 @@ impl<'a> Prepared<'a> {
                         let p = signal::play(u, &rec.segment_starts, r);
                         cols.push((0..n).map(|i| ch.sign[k] * (u[i] - p[i])).collect());
                         names.push(format!("PI weight {} r={:.3}", rec.inputs[k].name, r));
+                        nonneg.push(true);
+                    }
+                }
+            }
+            Cause::RateDependence if self.pose.is_some() => {
+                // Viscosity in each column: Prony terms on the model's column strain.
+                for (k, e, sens) in self.column_terms(c) {
+                    for tau in self.prony_taus() {
+                        let lp = signal::lowpass(e, &rec.time_s, &rec.segment_starts, tau);
+                        cols.push((0..n).map(|i| -sens[i] * (e[i] - lp[i])).collect());
+                        names.push(format!("Prony modulus column {} tau={:.3}s", k + 1, tau));
                         nonneg.push(true);
                     }
                 }
@@ -306,9 +345,18 @@ impl<'a> Prepared<'a> {
                 }
             }
             Cause::Offset => {
-                cols.push(vec![1.0; n]);
-                names.push(format!("{} bias", rec.outputs[c].name));
-                nonneg.push(false);
+                // pose z already has its free mounting height: a second constant is redundant
+                let has_constant = self.pose.is_some()
+                    && ch
+                        .design
+                        .regressors
+                        .iter()
+                        .any(|r| r.iter().all(|v| *v == 1.0));
+                if !has_constant {
+                    cols.push(vec![1.0; n]);
+                    names.push(format!("{} bias", rec.outputs[c].name));
+                    nonneg.push(false);
+                }
                 for (k, inp) in rec.inputs.iter().enumerate() {
                     cols.push(ch.jac[k].clone());
                     names.push(format!("{} bias", inp.name));
@@ -319,6 +367,45 @@ impl<'a> Prepared<'a> {
                 for (k, inp) in rec.inputs.iter().enumerate() {
                     cols.push((0..n).map(|i| inp.values[i] * ch.jac[k][i]).collect());
                     names.push(format!("{} gain - 1", inp.name));
+                    nonneg.push(false);
+                }
+            }
+            Cause::Nonlinearity if self.pose.is_some() => {
+                // Static mismatch of the columns' force law: a strain correction that is a
+                // complete cubic in the column's pressure and force, mapped to the tip. The
+                // columns are stacks of the same OCM, so they share the correction.
+                let (pm, pr) = {
+                    let m = (0..3).map(|k| self.means[k]).sum::<f64>() / 3.0;
+                    let r = (0..3).map(|k| self.ranges[k]).fold(0.0, f64::max);
+                    (m, if r > 0.0 { r } else { 1.0 })
+                };
+                let zl: Vec<f64> = rec.inputs[3]
+                    .values
+                    .iter()
+                    .map(|v| (v - self.means[3]) / self.ranges[3])
+                    .collect();
+                let terms = self.column_terms(c);
+                for (a, b) in [
+                    (0, 0),
+                    (1, 0),
+                    (0, 1),
+                    (2, 0),
+                    (1, 1),
+                    (0, 2),
+                    (3, 0),
+                    (2, 1),
+                    (1, 2),
+                    (0, 3),
+                ] {
+                    let mut col = vec![0.0; n];
+                    for &(k, _, sens) in &terms {
+                        let p = &rec.inputs[k].values;
+                        for i in 0..n {
+                            col[i] += sens[i] * ((p[i] - pm) / pr).powi(a) * zl[i].powi(b);
+                        }
+                    }
+                    cols.push(col);
+                    names.push(format!("column strain per pressure^{a}*load^{b}"));
                     nonneg.push(false);
                 }
             }
@@ -471,7 +558,40 @@ impl<'a> Prepared<'a> {
                 None
             };
             if let Some((d_fix, m_fix)) = hint {
+                // The single-cause estimate is biased by whatever else is in the data: refine
+                // it locally with the other extensions in the fit (lag by golden section on
+                // its log, then the dead time on quarter samples).
                 consider(d_fix, m_fix, &mut best);
+                let g = 0.5 * (5f64.sqrt() - 1.0);
+                let centre = if m_fix > 0.0 {
+                    m_fix.ln()
+                } else {
+                    (0.25f64).ln()
+                };
+                let (mut a, mut b) = (centre - 0.8, centre + 0.8);
+                let mut x1 = b - g * (b - a);
+                let mut x2 = a + g * (b - a);
+                let mut f1 = consider(d_fix, x1.exp(), &mut best);
+                let mut f2 = consider(d_fix, x2.exp(), &mut best);
+                for _ in 0..5 {
+                    if f1 < f2 {
+                        b = x2;
+                        x2 = x1;
+                        f2 = f1;
+                        x1 = b - g * (b - a);
+                        f1 = consider(d_fix, x1.exp(), &mut best);
+                    } else {
+                        a = x1;
+                        x1 = x2;
+                        f1 = f2;
+                        x2 = a + g * (b - a);
+                        f2 = consider(d_fix, x2.exp(), &mut best);
+                    }
+                }
+                let m_best = best.1;
+                for step in [-0.5, -0.25, 0.25, 0.5] {
+                    consider(d_fix + step, m_best, &mut best);
+                }
             } else {
                 for &d in &DELAYS {
                     for &m in &LAGS {
@@ -587,6 +707,14 @@ impl<'a> Prepared<'a> {
             params,
         }
     }
+}
+
+/// Range of a series (1 when flat or empty).
+fn span(x: &[f64]) -> f64 {
+    let lo = x.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = x.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let r = hi - lo;
+    if r > 0.0 && r.is_finite() { r } else { 1.0 }
 }
 
 /// Training mean square of a channel's baseline residual, used to weigh channels.

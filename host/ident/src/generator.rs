@@ -1,7 +1,7 @@
 //! Measured-like data with hidden effects, for blind tests of the identification.
 //!
 //! A record is made from the clean model (the energy model for `axial` and `bending`, a random
-//! affine map for `series`) driven by a rich identification protocol: ramps at rates spread
+//! affine map for `series`, the segment model for `pose`, see [`crate::pose_generator`]) driven by a rich identification protocol: ramps at rates spread
 //! over a decade and more, reversals at random amplitudes, holds, and stepped pressures. The
 //! true stiffness scales are drawn at random, then zero, one or two effects are added, each
 //! scaled so that its *visible* part (what the baseline's free parameters cannot absorb) has
@@ -20,7 +20,7 @@ use crate::signal;
 /// What to generate.
 #[derive(Debug, Clone)]
 pub struct Spec {
-    /// Record kind (`axial`, `bending` or `series`).
+    /// Record kind.
     pub kind: Kind,
     /// Hidden effects (empty for a clean control).
     pub effects: Vec<Cause>,
@@ -46,11 +46,11 @@ pub struct Generated {
     /// Short description of each effect's form and magnitude.
     pub details: Vec<String>,
     /// The visible part of all hidden effects per row (effect minus its least-squares
-    /// projection on the baseline's free regressors).
+    /// projection on the baseline's free regressors); for `pose`, the RMS over `x, y, z`.
     pub visible: Vec<f64>,
 }
 
-const DT_S: f64 = 0.05;
+pub(crate) const DT_S: f64 = 0.05;
 
 struct Scenario {
     inputs: Vec<Vec<f64>>,
@@ -60,7 +60,7 @@ struct Scenario {
 }
 
 /// Ramp-hold-reverse protocol for one drive inside `[lo, hi]`.
-fn drive_protocol(rng: &mut ChaCha8Rng, n: usize, lo: f64, hi: f64) -> Vec<f64> {
+pub(crate) fn drive_protocol(rng: &mut ChaCha8Rng, n: usize, lo: f64, hi: f64) -> Vec<f64> {
     let mut u = Vec::with_capacity(n);
     let mut x = 0.5 * (lo + hi);
     let mut up = true;
@@ -90,7 +90,13 @@ fn drive_protocol(rng: &mut ChaCha8Rng, n: usize, lo: f64, hi: f64) -> Vec<f64> 
 
 /// Stepped level sequence (pressures, initial strains): a new level every few seconds,
 /// reached by a 1 s ramp.
-fn stepped(rng: &mut ChaCha8Rng, n: usize, lo: f64, hi: f64, hold_s: (f64, f64)) -> Vec<f64> {
+pub(crate) fn stepped(
+    rng: &mut ChaCha8Rng,
+    n: usize,
+    lo: f64,
+    hi: f64,
+    hold_s: (f64, f64),
+) -> Vec<f64> {
     let mut u = Vec::with_capacity(n);
     let mut x = rng.random_range(lo..=hi);
     while u.len() < n {
@@ -164,7 +170,7 @@ impl Clean {
 }
 
 /// RMS of `e` after removing its least-squares projection on `regs`.
-fn visible_rms(e: &[f64], regs: &[Vec<f64>]) -> f64 {
+pub(crate) fn visible_rms(e: &[f64], regs: &[Vec<f64>]) -> f64 {
     let cols: Vec<&[f64]> = regs.iter().map(|r| r.as_slice()).collect();
     let mask = vec![true; e.len()];
     let f = lsq::fit(&cols, e, &mask, &[]);
@@ -172,7 +178,7 @@ fn visible_rms(e: &[f64], regs: &[Vec<f64>]) -> f64 {
 }
 
 /// `e` minus its least-squares projection on `regs`.
-fn visible_part(e: &[f64], regs: &[Vec<f64>]) -> Vec<f64> {
+pub(crate) fn visible_part(e: &[f64], regs: &[Vec<f64>]) -> Vec<f64> {
     let cols: Vec<&[f64]> = regs.iter().map(|r| r.as_slice()).collect();
     let mask = vec![true; e.len()];
     let f = lsq::fit(&cols, e, &mask, &[]);
@@ -185,7 +191,7 @@ fn visible_part(e: &[f64], regs: &[Vec<f64>]) -> Vec<f64> {
 /// a bend-angle gain or an initial-strain bias under the bending stiffness scales).
 pub fn hideable(kind: Kind) -> &'static [Cause] {
     match kind {
-        Kind::Axial => &Cause::CANDIDATES,
+        Kind::Axial | Kind::Pose => &Cause::CANDIDATES,
         Kind::Bending => &[
             Cause::Hysteresis,
             Cause::RateDependence,
@@ -206,6 +212,9 @@ pub fn hideable(kind: Kind) -> &'static [Cause] {
 
 /// Generates a record for `spec`. Effects not in [`hideable`] for the kind are ignored.
 pub fn generate(spec: &Spec) -> Generated {
+    if spec.kind == Kind::Pose {
+        return crate::pose_generator::generate_pose(spec);
+    }
     let mut rng = ChaCha8Rng::seed_from_u64(spec.seed);
     let n = spec.rows.max(200);
     let physics = Physics::table_3_1();

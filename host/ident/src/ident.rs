@@ -57,9 +57,9 @@ pub struct Report {
     pub extensions: Vec<String>,
     /// Their fitted parameters.
     pub extension_params: Vec<Param>,
-    /// Residual diagnostics of the baseline (first output channel).
+    /// Residual diagnostics of the baseline, per output channel.
     pub diagnostics: Vec<Diagnostic>,
-    /// Where the baseline residual is largest (first output channel).
+    /// Where the baseline residual is largest, per output channel.
     pub hotspots: Vec<Hotspot>,
     /// Selection settings.
     pub config: Config,
@@ -78,8 +78,11 @@ pub struct Identification {
     pub residual_after: Vec<Vec<f64>>,
     /// Held-out flags.
     pub test: Vec<bool>,
-    /// Diagnostic variable (values, label) of each named cause, for channel 0.
+    /// Diagnostic variable (values, label) of each named cause, for channel `plot_channel`.
     pub variables: Vec<(Cause, Vec<f64>, String)>,
+    /// The output channel plotted: the one whose held-out squared error the extension
+    /// reduces most (0 for single-output records).
+    pub plot_channel: usize,
 }
 
 /// Identifies what the baseline gets wrong in `rec`.
@@ -146,11 +149,27 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         .copied()
         .filter(|c| *c != Cause::None)
         .collect();
+    let heldout_sse = |y: &[f64], p: &[f64]| -> f64 {
+        (0..y.len())
+            .filter(|&i| test[i])
+            .map(|i| (y[i] - p[i]).powi(2))
+            .sum()
+    };
+    let plot_channel = (0..prep.channels.len())
+        .map(|c| {
+            let ch = &prep.channels[c];
+            let drop = heldout_sse(&ch.y, &sel.baseline.pred[c])
+                - heldout_sse(&ch.y, &sel.extended.pred[c]);
+            (c, drop)
+        })
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(c, _)| c)
+        .unwrap_or(0);
     let variables = sel
         .causes
         .iter()
         .map(|&c| {
-            let (v, l) = diagnostics::variable(&prep, c, 0);
+            let (v, l) = diagnostics::variable(&prep, c, plot_channel);
             (c, v, l)
         })
         .collect();
@@ -170,6 +189,22 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         .first()
         .map(|o| o.unit.clone())
         .unwrap_or_default();
+    // Every output channel's evidence; with several outputs each statistic names its channel.
+    let mut diagnostics = Vec::new();
+    let mut hotspots = Vec::new();
+    for c in 0..prep.channels.len() {
+        let mut d = diagnostics::diagnose(&prep, c);
+        let mut h = diagnostics::hotspots(&prep, c);
+        if prep.channels.len() > 1 {
+            let name = &rec.outputs[c].name;
+            d.iter_mut()
+                .for_each(|x| x.statistic = format!("{} [{name}]", x.statistic));
+            h.iter_mut()
+                .for_each(|x| x.input = format!("{} [residual of {name}]", x.input));
+        }
+        diagnostics.extend(d);
+        hotspots.extend(h);
+    }
     let report = Report {
         causes: sel.causes.clone(),
         baseline_rmse,
@@ -196,8 +231,8 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
                 std_err: *s,
             })
             .collect(),
-        diagnostics: diagnostics::diagnose(&prep, 0),
-        hotspots: diagnostics::hotspots(&prep, 0),
+        diagnostics,
+        hotspots,
         config: *cfg,
     };
     Ok(Identification {
@@ -207,5 +242,6 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         residual_after,
         test,
         variables,
+        plot_channel,
     })
 }

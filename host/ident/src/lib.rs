@@ -6,7 +6,8 @@
 //! [`manipulator`]) -> compute per-cause residual diagnostics ([`diagnostics`]) -> fit one
 //! model extension per cause and score it on held-out rows ([`extension`]) -> select causes by
 //! held-out gain and an information criterion with a false-discovery guard ([`select`]) ->
-//! report ([`ident`], [`report`]). [`generator`] makes measured-like data with hidden effects.
+//! report ([`ident`], [`report`]). [`generator`] (with [`pose_generator`] for `pose`) makes
+//! measured-like data with hidden effects.
 
 // Numeric kernels index several parallel arrays by row; iterator chains over four zipped
 // slices read worse than the index.
@@ -24,6 +25,7 @@ pub mod lsq;
 pub mod manipulator;
 pub mod matv5;
 pub mod physics;
+pub mod pose_generator;
 pub mod report;
 pub mod select;
 pub mod signal;

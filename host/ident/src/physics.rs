@@ -17,6 +17,12 @@ const BEND_STRAIN_NODES: usize = 61;
 const BEND_ANGLE_NODES: usize = 81;
 /// Fraction of the largest feasible bend covered by the table.
 const BEND_FRACTION: f64 = 0.97;
+/// Inverse axial table (strain at force and pressure, unit stiffness scale): force nodes over
+/// [`INV_FORCE_RANGE`] and pressure nodes over [`INV_PRESSURE_RANGE`].
+const INV_FORCE_NODES: usize = 176;
+const INV_FORCE_RANGE: (f64, f64) = (-1.5, 2.0);
+const INV_PRESSURE_NODES: usize = 481;
+const INV_PRESSURE_RANGE: (f64, f64) = (-3000.0, 9000.0);
 
 /// Tabulated axial and bending terms of one OCM.
 #[derive(Debug, Clone)]
@@ -33,6 +39,8 @@ pub struct Physics {
     bend_max: Vec<f64>,
     /// (bar_nm, hinge_nm, pressure_nm_per_pa) on [strain node][angle node].
     bend: Vec<[f64; 3]>,
+    /// Strain on [force node][pressure node] at unit stiffness scale, built on first use.
+    inverse: OnceLock<Vec<f64>>,
 }
 
 /// Catmull-Rom interpolation of `f` sampled at unit spacing, at fractional index `x`.
@@ -90,6 +98,7 @@ impl Physics {
             bend_hi,
             bend_max,
             bend,
+            inverse: OnceLock::new(),
         })
     }
 
@@ -121,6 +130,66 @@ impl Physics {
     pub fn axial_force(&self, strain: f64, pressure_pa: f64, scale_b: f64, scale_h: f64) -> f64 {
         let t = self.axial(strain);
         scale_b * t[0] + scale_h * t[1] + pressure_pa * t[2]
+    }
+
+    /// Strain at which `F_A(eps, P) = force_n` with both stiffnesses scaled by `scale` (eq
+    /// 3.33), by bisection on the tabulated force, which increases with strain; saturates at
+    /// the table ends. The reference for [`Self::axial_strain`].
+    pub fn axial_strain_exact(&self, force_n: f64, pressure_pa: f64, scale: f64) -> f64 {
+        let (mut lo, mut hi) = self.strain_range();
+        let g = |e: f64| self.axial_force(e, pressure_pa, scale, scale) - force_n;
+        if g(lo) >= 0.0 {
+            return lo;
+        }
+        if g(hi) <= 0.0 {
+            return hi;
+        }
+        for _ in 0..48 {
+            let mid = 0.5 * (lo + hi);
+            if g(mid) > 0.0 {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    }
+
+    /// Strain at which `F_A(eps, P) = force_n` with both stiffnesses scaled by `scale`.
+    ///
+    /// `F_A = scale (bar + hinge) + P pressure`, so the strain depends on `(F / scale, P /
+    /// scale)` only: one table at unit scale, interpolated bicubically, serves every scale.
+    /// Points outside the table fall back to [`Self::axial_strain_exact`].
+    pub fn axial_strain(&self, force_n: f64, pressure_pa: f64, scale: f64) -> f64 {
+        if scale.is_nan() || scale <= 0.0 {
+            return self.axial_strain_exact(force_n, pressure_pa, scale);
+        }
+        let f = force_n / scale;
+        let p = pressure_pa / scale;
+        let (f0, f1) = INV_FORCE_RANGE;
+        let (p0, p1) = INV_PRESSURE_RANGE;
+        if !(f >= f0 && f <= f1 && p >= p0 && p <= p1) {
+            return self.axial_strain_exact(force_n, pressure_pa, scale);
+        }
+        let table = self.inverse.get_or_init(|| {
+            let mut t = Vec::with_capacity(INV_FORCE_NODES * INV_PRESSURE_NODES);
+            for i in 0..INV_FORCE_NODES {
+                let fi = f0 + (f1 - f0) * i as f64 / (INV_FORCE_NODES - 1) as f64;
+                for j in 0..INV_PRESSURE_NODES {
+                    let pj = p0 + (p1 - p0) * j as f64 / (INV_PRESSURE_NODES - 1) as f64;
+                    t.push(self.axial_strain_exact(fi, pj, 1.0));
+                }
+            }
+            t
+        });
+        let xf = (f - f0) / (f1 - f0) * (INV_FORCE_NODES - 1) as f64;
+        let xp = (p - p0) / (p1 - p0) * (INV_PRESSURE_NODES - 1) as f64;
+        let e = cubic(xf, INV_FORCE_NODES, |i| {
+            cubic(xp, INV_PRESSURE_NODES, |j| {
+                table[i * INV_PRESSURE_NODES + j]
+            })
+        });
+        e.clamp(self.strain_lo, self.strain_hi)
     }
 
     /// Largest feasible bend angle at initial strain `strain0`, radians.
@@ -215,6 +284,35 @@ mod tests {
             }
         }
         assert!(worst < 1e-2, "bending relative table error {worst}");
+    }
+
+    #[test]
+    fn inverse_table_solves_the_force_law() {
+        let p = Physics::table_3_1();
+        let (lo, hi) = p.strain_range();
+        let mut worst: f64 = 0.0;
+        let mut checked = 0;
+        for a in 0..41 {
+            for b in 0..53 {
+                let f = -1.2 + 2.9 * (a as f64 + 0.31) / 41.0;
+                let pr = -2500.0 + 10500.0 * (b as f64 + 0.57) / 53.0;
+                for s in [0.6, 1.0, 1.7] {
+                    let exact = p.axial_strain_exact(f * s, pr * s, s);
+                    // the clamp at the table ends is a kink the spline does not follow
+                    if exact < lo + 0.05 || exact > hi - 0.05 {
+                        continue;
+                    }
+                    let e = p.axial_strain(f * s, pr * s, s);
+                    worst = worst.max((e - exact).abs());
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 3000, "{checked}");
+        assert!(worst < 1e-5, "inverse table strain error {worst}");
+        // outside the table: the exact solution, which solves F_A = f
+        let e = p.axial_strain(30.0, 500.0, 1.0);
+        assert_eq!(e, p.axial_strain_exact(30.0, 500.0, 1.0));
     }
 
     #[test]

@@ -217,8 +217,8 @@ fn register_font() {
     });
 }
 
-/// Writes one PNG per named cause: held-out residual against the cause's diagnostic
-/// variable, before (grey) and after (blue) the extension.
+/// Writes one PNG per named cause: held-out residual (of the output channel the extension
+/// improves most) against the cause's diagnostic variable, before (grey) and after (blue).
 pub fn plots(id: &Identification, dir: &Path) -> Result<Vec<PathBuf>, IdentError> {
     register_font();
     let mut out = Vec::new();
@@ -226,6 +226,7 @@ pub fn plots(id: &Identification, dir: &Path) -> Result<Vec<PathBuf>, IdentError
     // thin long records so that a plot stays light
     let step = (rows.len() / 5000).max(1);
     let rows: Vec<usize> = rows.into_iter().step_by(step).collect();
+    let pc = id.plot_channel;
     for (cause, var, label) in &id.variables {
         let name = if *cause == Cause::None {
             "residual"
@@ -235,18 +236,18 @@ pub fn plots(id: &Identification, dir: &Path) -> Result<Vec<PathBuf>, IdentError
         let path = dir.join(format!("residual_vs_{name}.png"));
         let before: Vec<(f64, f64)> = rows
             .iter()
-            .map(|&i| (var[i], id.residual_before[0][i]))
+            .map(|&i| (var[i], id.residual_before[pc][i]))
             .collect();
         let after: Vec<(f64, f64)> = rows
             .iter()
-            .map(|&i| (var[i], id.residual_after[0][i]))
+            .map(|&i| (var[i], id.residual_after[pc][i]))
             .collect();
         draw(
             &path,
             &before,
             &after,
             label,
-            &format!("residual [{}]", id.report.unit),
+            &format!("residual of {} [{}]", id.outputs[pc], id.report.unit),
             cause.name(),
         )
         .map_err(|e| IdentError::Invalid(format!("{}: plot failed: {e}", path.display())))?;

@@ -14,7 +14,10 @@
 //! against the current one and gains at least `min_extra_gain_pct` more on held-out data
 //! (so that the leftovers of an imperfect first extension are not named as a second cause).
 //! Finally each named cause is swapped for an unnamed one when that improves the BIC by more
-//! than the margin (parsimony when one extension's span contains another's). No passing candidate means `none`.
+//! than the margin, or when the swapped set has fewer parameters and a BIC within the margin
+//! (parsimony when one extension's span contains another's: Occam's window). Last, every named
+//! cause must still pass the addition tests against the others, or the weakest is dropped.
+//! No passing candidate means `none`.
 
 use serde::Serialize;
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
@@ -272,8 +275,9 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
     for _ in 0..2 {
         let mut improved = false;
         for i in 0..causes.len() {
-            let mut best_swap: Option<(Vec<Cause>, SetFit)> = None;
-            let mut best_bic = bic(&current);
+            let cur_bic = bic(&current);
+            let cur_k = current.extra_params;
+            let mut best_swap: Option<(f64, Vec<Cause>, SetFit)> = None;
             for c in Cause::CANDIDATES {
                 if causes.contains(&c) {
                     continue;
@@ -282,12 +286,20 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
                 set[i] = c;
                 let f = prep.fit_set(&set);
                 let b = bic(&f);
-                if b < best_bic - cfg.bic_margin {
-                    best_bic = b;
-                    best_swap = Some((set, f));
+                // the swapped set must itself pass the held-out gain test against the
+                // baseline (a flexible extension can win the training criterion by fitting
+                // what does not generalise)
+                let holds = heldout_rmse(prep, &f.pred)
+                    <= (1.0 - cfg.min_gain_pct / 100.0) * heldout_rmse(prep, &base.pred);
+                let decisive = b < cur_bic - cfg.bic_margin;
+                // Occam's window: when the criterion cannot tell the sets apart (within the
+                // margin), the one with fewer parameters is kept
+                let simpler = f.extra_params < cur_k && b < cur_bic + cfg.bic_margin;
+                if holds && (decisive || simpler) && best_swap.as_ref().is_none_or(|x| b < x.0) {
+                    best_swap = Some((b, set, f));
                 }
             }
-            if let Some((set, f)) = best_swap {
+            if let Some((_, set, f)) = best_swap {
                 causes = set;
                 current = f;
                 improved = true;
@@ -295,6 +307,29 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
         }
         if !improved {
             break;
+        }
+    }
+    // Backward check: every named cause must still pass the addition tests against the set
+    // of the others (a cause added later can make an earlier one redundant); the weakest
+    // failing one is dropped until all pass.
+    while causes.len() > 1 {
+        let mut weakest: Option<(f64, usize, SetFit)> = None;
+        for i in 0..causes.len() {
+            let mut rest = causes.clone();
+            rest.remove(i);
+            let f = prep.fit_set(&rest);
+            let s = score(prep, &f, &current, cfg, m, causes[i]);
+            let earns = s.accepted && s.gain_pct >= cfg.min_extra_gain_pct;
+            if !earns && weakest.as_ref().is_none_or(|w| s.score < w.0) {
+                weakest = Some((s.score, i, f));
+            }
+        }
+        match weakest {
+            Some((_, i, f)) => {
+                causes.remove(i);
+                current = f;
+            }
+            None => break,
         }
     }
     Selection {

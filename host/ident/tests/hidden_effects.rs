@@ -8,7 +8,8 @@
 //!
 //! Magnitudes: the visible effect RMS (what the baseline's free parameters cannot absorb) is
 //! drawn log-uniformly between 2x and 10x the noise RMS; the noise is 0.3 % to 3 % of the
-//! signal's standard deviation. Records have 2000 rows (100 s at 20 Hz).
+//! signal's standard deviation (pooled over x, y, z for `pose`). Records have 2000 rows (100 s
+//! at 20 Hz). Two-effect mixtures run on `axial` and `pose` records.
 
 use ocm_ident::generator::{Spec, generate, hideable};
 use ocm_ident::{Cause, Config, Kind, identify};
@@ -83,8 +84,15 @@ fn run_cause(kind: Kind, cause: Cause, seeds: u64, salt: u64) -> Tally {
 }
 
 fn check_kind(kind: Kind, salt: u64) {
+    let causes: Vec<Cause> = std::iter::once(Cause::None)
+        .chain(hideable(kind).iter().copied())
+        .collect();
+    check_causes(kind, &causes, salt);
+}
+
+fn check_causes(kind: Kind, causes: &[Cause], salt: u64) {
     let mut failures = Vec::new();
-    for cause in std::iter::once(Cause::None).chain(hideable(kind).iter().copied()) {
+    for &cause in causes {
         let t = run_cause(kind, cause, SEEDS, salt);
         println!(
             "{} {}: {}/{} correct; {} strong cases, {} below 50 % gain",
@@ -129,23 +137,51 @@ fn series_hidden_effects_are_found() {
     check_kind(Kind::Series, 3);
 }
 
+// Pose runs in two halves so that the test harness spreads them over both cores.
 #[test]
-fn two_effect_mixtures_name_both_causes() {
+fn pose_clean_and_memory_effects_are_found() {
+    check_causes(
+        Kind::Pose,
+        &[
+            Cause::None,
+            Cause::Hysteresis,
+            Cause::RateDependence,
+            Cause::Softening,
+        ],
+        4,
+    );
+}
+
+#[test]
+fn pose_static_and_lag_effects_are_found() {
+    check_causes(
+        Kind::Pose,
+        &[
+            Cause::Latency,
+            Cause::Offset,
+            Cause::Gain,
+            Cause::Nonlinearity,
+        ],
+        4,
+    );
+}
+
+#[test]
+fn pose_battery_covers_every_hideable_cause() {
+    // the two halves above together run the clean control and every cause
+    assert_eq!(hideable(Kind::Pose), &Cause::CANDIDATES);
+}
+
+/// Runs two-effect mixtures; returns (records naming exactly both causes, records counted).
+fn run_mixtures(kind: Kind, pairs: &[(Cause, Cause)], seeds: u64, salt: u64) -> (usize, usize) {
     let cfg = Config::default();
-    let pairs = [
-        (Cause::Hysteresis, Cause::Offset),
-        (Cause::RateDependence, Cause::Gain),
-        (Cause::Softening, Cause::Latency),
-        (Cause::Hysteresis, Cause::Nonlinearity),
-        (Cause::Latency, Cause::Offset),
-    ];
     let mut both = 0;
     let mut total = 0;
     for (k, (a, b)) in pairs.iter().enumerate() {
-        for s in 0..16u64 {
-            let seed = 1_000_003 * (k as u64 + 1) + s;
+        for s in 0..seeds {
+            let seed = salt * (k as u64 + 1) + s;
             let g = generate(&Spec {
-                kind: Kind::Axial,
+                kind,
                 effects: vec![*a, *b],
                 seed,
                 rows: ROWS,
@@ -156,7 +192,8 @@ fn two_effect_mixtures_name_both_causes() {
             if heldout_ratio(&g) >= 3.0 {
                 assert!(
                     named.contains(a) || named.contains(b),
-                    "mixture {a}+{b} seed {seed}: neither cause named ({named:?})"
+                    "{} mixture {a}+{b} seed {seed}: neither cause named ({named:?})",
+                    kind.name()
                 );
             }
             // a pair counts when the generator reached both magnitudes (caps can limit one)
@@ -166,7 +203,8 @@ fn two_effect_mixtures_name_both_causes() {
                     both += 1;
                 } else {
                     println!(
-                        "mixture {a}+{b} seed {seed}: got {named:?} ratios {:?}",
+                        "{} mixture {a}+{b} seed {seed}: got {named:?} ratios {:?}",
+                        kind.name(),
                         g.ratios
                     );
                 }
@@ -174,12 +212,36 @@ fn two_effect_mixtures_name_both_causes() {
             if heldout_ratio(&g) >= 3.0 {
                 assert!(
                     id.report.gain_pct >= 50.0,
-                    "mixture {a}+{b} seed {seed}: gain {:.1}",
+                    "{} mixture {a}+{b} seed {seed}: gain {:.1}",
+                    kind.name(),
                     id.report.gain_pct
                 );
             }
         }
     }
-    println!("mixtures: {both}/{total} name exactly both causes");
+    println!(
+        "{} mixtures: {both}/{total} name exactly both causes",
+        kind.name()
+    );
+    (both, total)
+}
+
+const PAIRS: [(Cause, Cause); 5] = [
+    (Cause::Hysteresis, Cause::Offset),
+    (Cause::RateDependence, Cause::Gain),
+    (Cause::Softening, Cause::Latency),
+    (Cause::Hysteresis, Cause::Nonlinearity),
+    (Cause::Latency, Cause::Offset),
+];
+
+#[test]
+fn two_effect_mixtures_name_both_causes() {
+    let (both, total) = run_mixtures(Kind::Axial, &PAIRS, 16, 1_000_003);
+    assert!(both as f64 >= 0.8 * total as f64, "{both}/{total}");
+}
+
+#[test]
+fn pose_two_effect_mixtures_name_both_causes() {
+    let (both, total) = run_mixtures(Kind::Pose, &PAIRS, 16, 7_000_001);
     assert!(both as f64 >= 0.8 * total as f64, "{both}/{total}");
 }

@@ -139,3 +139,45 @@ fn lagged_pose_data_names_latency() {
     let delay = get("dead time") + get("lag time constant");
     assert!((delay - 0.4).abs() < 0.1, "mean delay {delay}");
 }
+
+/// The diagnostics run on every output channel of a pose record and read the hidden effect's
+/// signature: a lagging column strain (hysteresis, viscosity) pulls the tip against its motion,
+/// so the residual is negative while the column strains load the tip; a lagged pose peaks later.
+#[test]
+fn pose_diagnostics_cover_every_channel_and_read_the_signature() {
+    use ocm_ident::generator::{Spec, generate};
+    let diag = |cause: Cause, of: Cause| -> Vec<f64> {
+        let g = generate(&Spec {
+            kind: Kind::Pose,
+            effects: vec![cause],
+            seed: 5,
+            rows: 2000,
+            ratio: (8.0, 8.0),
+        });
+        let id = identify(&g.record, &Config::default()).unwrap();
+        assert_eq!(id.report.causes, vec![cause], "{:?}", g.details);
+        // seven statistics per output channel, each naming its channel
+        assert_eq!(id.report.diagnostics.len(), 21);
+        for name in ["[x]", "[y]", "[z]"] {
+            let n = id
+                .report
+                .diagnostics
+                .iter()
+                .filter(|d| d.statistic.ends_with(name) && d.value.is_finite())
+                .count();
+            assert_eq!(n, 7, "{name}");
+        }
+        id.report
+            .diagnostics
+            .iter()
+            .filter(|d| d.cause == of)
+            .map(|d| d.value)
+            .collect()
+    };
+    let h = diag(Cause::Hysteresis, Cause::Hysteresis);
+    assert!(h.iter().all(|v| *v < 0.0), "loading minus unloading {h:?}");
+    let r = diag(Cause::RateDependence, Cause::RateDependence);
+    assert!(r.iter().all(|v| *v < 0.0), "rate correlation {r:?}");
+    let l = diag(Cause::Latency, Cause::Latency);
+    assert!(l.iter().any(|v| *v > 0.0), "peak lag {l:?}");
+}
