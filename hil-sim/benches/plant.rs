@@ -81,6 +81,27 @@ fn bench(c: &mut Criterion) {
                 run_with_mcu("circle", &cfg, &mut fw).expect("run").rmse_mm
             })
         });
+        // SIL throughput on 2 cores: two closed-loop circles (26 simulated
+        // seconds) on two threads.
+        group.bench_function("firmware_cl_circle_2x13s_2threads", |b| {
+            b.iter(|| {
+                std::thread::scope(|s| {
+                    let runs: Vec<_> = (0..2)
+                        .map(|_| {
+                            s.spawn(|| {
+                                let mut buf = vec![0u8; LUT_CAPACITY];
+                                let mut fw = FirmwareMcu::in_process(&mut buf, &image, &cfg, true)
+                                    .expect("firmware");
+                                run_with_mcu("circle", &cfg, &mut fw).expect("run").rmse_mm
+                            })
+                        })
+                        .collect();
+                    runs.into_iter()
+                        .map(|h| h.join().expect("run thread"))
+                        .sum::<f64>()
+                })
+            })
+        });
         // The lab's own unit of work on 2 cores: firmware OL and CL (26
         // simulated seconds in all) on two threads, the oracle beside them,
         // LUT build included.

@@ -14,6 +14,10 @@ use ocm_shared::protocol::{
 use crate::SimError;
 use crate::firmware::Link;
 
+/// How long a read spins for bytes before it blocks (one core busy while
+/// a run waits on the firmware).
+const SPIN: Duration = Duration::from_millis(10);
+
 /// A firmware instance behind a serial device.
 pub struct SerialLink {
     path: String,
@@ -105,6 +109,14 @@ impl SerialLink {
             }
             if Instant::now() >= end {
                 return Ok(None);
+            }
+            // Spin before blocking: a reply is usually under way, and waking
+            // a blocked thread (in a VM, an idle CPU) costs more than the
+            // bytes take to come; under QEMU a SensorFrame exchange takes
+            // 0.8 ms spinning against 1.3-2 ms blocking.
+            let spin_end = Instant::now() + SPIN;
+            while self.port.bytes_to_read().unwrap_or(1) == 0 && Instant::now() < spin_end {
+                std::hint::spin_loop();
             }
             let n = match self.port.read(&mut buf) {
                 Ok(n) => n,
