@@ -136,3 +136,26 @@ fn firmware_runs_are_deterministic() {
     let b = logs(&other);
     assert!(a.iter().zip(&b).all(|(x, y)| x != y));
 }
+
+/// The firmware's PD (with its integral) rejects an unannounced 250 g step
+/// load: back within 1 mm in a few seconds; the open loop stays off.
+#[test]
+fn firmware_rejects_a_step_load() {
+    let cfg = SimConfig::default();
+    let r = ocm_hilsim::firmware::run_scenario_with_firmware("step_load", &cfg).expect("run");
+    let fig = |name: &str| {
+        &r.runs
+            .iter()
+            .find(|x| x.controller == name)
+            .unwrap()
+            .figures
+    };
+    let (cl, ol) = (fig("firmware_cl"), fig("firmware_ol"));
+    println!("CL {cl:?}\nOL {ol:?}");
+    assert!(cl["max_deviation_mm"] > 10.0, "the step is felt: {cl:?}");
+    assert_eq!(cl["recovered"], 1.0, "{cl:?}");
+    assert!(cl["recovery_s"] < 5.0, "{cl:?}");
+    assert!(cl["final_error_mm"] < 0.5, "{cl:?}");
+    assert!(ol["final_error_mm"] > 10.0, "{ol:?}");
+    assert_eq!(cl["limit_violations"], 0.0);
+}
