@@ -16,6 +16,18 @@ fn track(args: &[&str]) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).expect("one JSON summary")
 }
 
+/// Runs `ocm track ARGS`, which must fail, and returns its standard error.
+fn track_fails(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
+        .arg("track")
+        .args(args)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .expect("the ocm binary runs");
+    assert!(!out.status.success(), "ocm track {args:?} succeeded");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
 /// The controllers of a scenario summary, in order.
 fn controllers(r: &serde_json::Value) -> Vec<&str> {
     r["runs"]
@@ -93,26 +105,9 @@ fn host_controllers_run_on_request() {
 
 #[test]
 fn bad_mcu_and_missing_port_are_named() {
-    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
-        .args(["track", "--mcu", "serial", "--scenario", "circle"])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = track_fails(&["--mcu", "serial", "--scenario", "circle"]);
     assert!(err.contains("port:PATH"), "{err}");
-    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
-        .args([
-            "track",
-            "--mcu",
-            "port:/dev/ocm-absent",
-            "--scenario",
-            "circle",
-        ])
-        .env("RUST_BACKTRACE", "0")
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = track_fails(&["--mcu", "port:/dev/ocm-absent", "--scenario", "circle"]);
     assert!(
         err.contains("/dev/ocm-absent") && err.contains("serial port"),
         "{err}"
@@ -121,12 +116,7 @@ fn bad_mcu_and_missing_port_are_named() {
 
 #[test]
 fn unknown_scenario_is_named() {
-    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
-        .args(["track", "--scenario", "zigzag"])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = track_fails(&["--scenario", "zigzag"]);
     assert!(err.contains("zigzag") && err.contains("circle"), "{err}");
 }
 
@@ -181,14 +171,8 @@ fn the_example_config_is_the_default_lab_and_bad_keys_are_named() {
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"));
     let bad = dir.join("bad_lab.toml");
     std::fs::write(&bad, "[plant.effects]\nstiffness_spred = 0.1\n").unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
-        .args(["track", "--scenario", "circle", "--config"])
-        .arg(&bad)
-        .env("RUST_BACKTRACE", "0")
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let bad = bad.to_str().unwrap();
+    let err = track_fails(&["--scenario", "circle", "--config", bad]);
     assert!(
         err.contains("stiffness_spred") && err.contains("line 2"),
         "{err}"

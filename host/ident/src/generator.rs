@@ -186,6 +186,22 @@ pub(crate) fn visible_part(e: &[f64], regs: &[Vec<f64>]) -> Vec<f64> {
     e.iter().zip(&p).map(|(a, b)| a - b).collect()
 }
 
+/// Bouc-Wen-like rate-independent state driven by `x`, saturating at `+-z0`.
+pub(crate) fn bouc_wen(x: &[f64], z0: f64) -> Vec<f64> {
+    let mut z = vec![0.0; x.len()];
+    for i in 1..x.len() {
+        let d = x[i] - x[i - 1];
+        let zi = z[i - 1];
+        let dz = if d * zi > 0.0 {
+            d * (1.0 - zi.abs() / z0)
+        } else {
+            d
+        };
+        z[i] = (zi + dz).clamp(-z0, z0);
+    }
+    z
+}
+
 /// The effects that can be hidden in a kind: a cause that the baseline's free parameters
 /// absorb is no discrepancy (an output offset or an input gain under the affine `series` map;
 /// a bend-angle gain or an initial-strain bias under the bending stiffness scales).
@@ -304,17 +320,7 @@ pub fn generate(spec: &Spec) -> Generated {
         let shape: Box<dyn Fn(f64) -> Vec<f64>> = match cause {
             Cause::Hysteresis => {
                 let z0 = r_drive * rng.random_range(0.03..0.15);
-                let mut z = vec![0.0; n];
-                for i in 1..n {
-                    let d = drive[i] - drive[i - 1];
-                    let zi = z[i - 1];
-                    let dz = if d * zi > 0.0 {
-                        d * (1.0 - zi.abs() / z0)
-                    } else {
-                        d
-                    };
-                    z[i] = (zi + dz).clamp(-z0, z0);
-                }
+                let z = bouc_wen(drive, z0);
                 details.push(format!(
                     "Bouc-Wen, saturation {:.3} of drive range",
                     z0 / r_drive

@@ -16,7 +16,9 @@ use rand_distr::{Distribution, Normal};
 
 use crate::cause::Cause;
 use crate::data::{Channel, Kind, Record};
-use crate::generator::{DT_S, Generated, Spec, drive_protocol, stepped, visible_part, visible_rms};
+use crate::generator::{
+    DT_S, Generated, Spec, bouc_wen, drive_protocol, stepped, visible_part, visible_rms,
+};
 use crate::manipulator::Segment;
 use crate::physics::Physics;
 use crate::signal;
@@ -56,22 +58,6 @@ fn tips(physics: &Physics, e: &[Vec<f64>; 3], z_off: f64) -> Vec<f64> {
 
 fn minus(a: &[f64], b: &[f64]) -> Vec<f64> {
     a.iter().zip(b).map(|(x, y)| x - y).collect()
-}
-
-/// Bouc-Wen-like rate-independent state driven by `x`, saturating at `+-z0`.
-fn bouc_wen(x: &[f64], z0: f64) -> Vec<f64> {
-    let mut z = vec![0.0; x.len()];
-    for i in 1..x.len() {
-        let d = x[i] - x[i - 1];
-        let zi = z[i - 1];
-        let dz = if d * zi > 0.0 {
-            d * (1.0 - zi.abs() / z0)
-        } else {
-            d
-        };
-        z[i] = (zi + dz).clamp(-z0, z0);
-    }
-    z
 }
 
 /// Generates a pose record for `spec` (every cause can be hidden).
