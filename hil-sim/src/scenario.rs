@@ -114,11 +114,11 @@ pub struct SimConfig {
 const HEAVIEST_LOAD: (f64, f64) = (0.250, 1.80);
 
 /// Column strain the working pressure range reaches at either end.
-const WORKING_STRAIN: f64 = 0.55;
+const WORKING_STRAIN: f64 = 0.6;
 
 /// The working pressure range of `plant`: every pressure that holds the
-/// columns within strain -0.55..0.55, unloaded or under the heaviest
-/// scenario load, inside the regulator range.
+/// columns within strain -0.6..0.6 (the model's strain range), unloaded or
+/// under the heaviest scenario load, inside the regulator range.
 ///
 /// Why not the regulator's own range: the OCMs use a few kilopascals of
 /// it; a controller allowed the rest (a winding integrator, a chamber cut)

@@ -178,6 +178,7 @@ fn plot(file: &Path, out: &Path) -> Result<()> {
         x_label: "strain eps [-]",
         y_label: "axial force F_z [N]",
         series: axial,
+        equal_axes: false,
     }
     .write(out, "axial_force_strain")?;
 
@@ -213,6 +214,7 @@ fn plot(file: &Path, out: &Path) -> Result<()> {
         x_label: "bending angle phi [rad]",
         y_label: "moment M [N m]",
         series: bending,
+        equal_axes: false,
     }
     .write(out, "moment_angle")?;
     println!(

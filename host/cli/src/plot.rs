@@ -26,6 +26,8 @@ pub struct Chart<'a> {
     pub y_label: &'a str,
     /// The curves, drawn with a sequential colour map in order.
     pub series: Vec<Series>,
+    /// One unit is as long on both axes (maps, trajectories).
+    pub equal_axes: bool,
 }
 
 /// plotters draws text with a font it is given; we embed DejaVu Sans so the
@@ -75,7 +77,20 @@ impl Chart<'_> {
         if y0 >= y1 {
             y1 = y0 + 1.0;
         }
-        let pad = 0.04 * (y1 - y0);
+        let mut pad = 0.04 * (y1 - y0);
+        if self.equal_axes {
+            // The plot area left inside the margins and label areas below.
+            let (w, h) = area.dim_in_pixel();
+            let (pw, ph) = (
+                f64::from(w.saturating_sub(2 * 16 + 72).max(1)),
+                f64::from(h.saturating_sub(2 * 16 + 48 + 40).max(1)),
+            );
+            let scale = ((x1 - x0) / pw).max((y1 - y0 + 2.0 * pad) / ph);
+            let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+            (x0, x1) = (cx - 0.5 * scale * pw, cx + 0.5 * scale * pw);
+            (y0, y1) = (cy - 0.5 * scale * ph, cy + 0.5 * scale * ph);
+            pad = 0.0;
+        }
         let mut chart = ChartBuilder::on(&area)
             .caption(self.title, ("sans-serif", 24))
             .margin(16)

@@ -36,6 +36,7 @@ pub fn write(report: &ScenarioReport, dir: &Path) -> Result<()> {
                         dots: true,
                     },
                 ],
+                equal_axes: true,
             }
             .write(dir, stem)?;
         }
@@ -67,6 +68,7 @@ pub fn write(report: &ScenarioReport, dir: &Path) -> Result<()> {
         x_label: "x, mm",
         y_label: "y, mm",
         series: traj,
+        equal_axes: true,
     }
     .write(dir, &format!("{}_trajectory", report.name))?;
     let title = format!("{}: position error", report.name);
@@ -75,6 +77,7 @@ pub fn write(report: &ScenarioReport, dir: &Path) -> Result<()> {
         x_label: "time, s",
         y_label: "error, mm",
         series: err,
+        equal_axes: false,
     }
     .write(dir, &format!("{}_error", report.name))
 }

@@ -47,7 +47,10 @@ fn circle_summary_orders_the_controllers_and_is_deterministic() {
         a["oracle_rmse_mm"].as_f64().unwrap(),
     );
     assert!(cl < 0.5 * ol, "closed loop {cl} mm vs open loop {ol} mm");
-    assert!(oracle < cl, "oracle {oracle} mm vs closed loop {cl} mm");
+    assert!(
+        cl <= 1.5 * oracle,
+        "closed loop {cl} mm vs oracle {oracle} mm"
+    );
     assert!(a["realtime_factor"].as_f64().unwrap() > 0.0);
     let b = track(&["--short", "--scenario", "circle", "--seed", "7", "--json"]);
     for key in ["ol_rmse_mm", "cl_rmse_mm", "oracle_rmse_mm"] {
