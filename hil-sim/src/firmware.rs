@@ -220,51 +220,64 @@ impl<L: Link> FirmwareMcu<L> {
         Ok(me)
     }
 
-    fn send(&mut self, body: CommandBody) -> Result<Reply, SimError> {
-        self.seq = self.seq.wrapping_add(1);
-        let cmd = Command {
-            seq: self.seq,
-            body,
-        };
-        let reply = self.link.exchange(&cmd, self.now_us)?;
-        if reply.seq != cmd.seq {
-            return Err(SimError::Mcu {
-                name: self.name.clone(),
-                message: format!(
-                    "reply to command {} answers command {}: {:?}",
-                    cmd.seq, reply.seq, reply.body
-                ),
-            });
+    fn error(&self, message: String) -> SimError {
+        SimError::Mcu {
+            name: self.name.clone(),
+            message,
         }
-        Ok(reply)
     }
 
     fn unexpected(&self, body: &ReplyBody) -> SimError {
-        SimError::Mcu {
-            name: self.name.clone(),
-            message: format!("unexpected reply {body:?}"),
-        }
+        self.error(format!("unexpected reply {body:?}"))
     }
 
-    fn unexpected_count(&self, sent: usize, got: usize) -> SimError {
-        SimError::Mcu {
-            name: self.name.clone(),
-            message: format!("{got} replies to {sent} commands"),
+    /// Sends `bodies` in one batch under fresh sequence numbers; every reply
+    /// must answer its own command and none may be an error.
+    fn exchange(
+        &mut self,
+        bodies: impl IntoIterator<Item = CommandBody>,
+    ) -> Result<Vec<Reply>, SimError> {
+        let mut cmds: HVec<Command, 3> = HVec::new();
+        for body in bodies {
+            self.seq = self.seq.wrapping_add(1);
+            cmds.push(Command {
+                seq: self.seq,
+                body,
+            })
+            .map_err(|_| self.error("more than 3 commands in one batch".into()))?;
         }
+        let replies = self.link.exchange_all(&cmds, self.now_us)?;
+        if replies.len() != cmds.len() {
+            return Err(self.error(format!(
+                "{} replies to {} commands",
+                replies.len(),
+                cmds.len()
+            )));
+        }
+        for (c, r) in cmds.iter().zip(&replies) {
+            if r.seq != c.seq {
+                return Err(self.error(format!(
+                    "reply to command {} answers command {}: {:?}",
+                    c.seq, r.seq, r.body
+                )));
+            }
+            if let ReplyBody::Error(e) = &r.body {
+                let what = format!("{:?}", c.body);
+                return Err(self.error(format!(
+                    "{e:?} in reply to {}",
+                    what.chars().take(60).collect::<String>()
+                )));
+            }
+        }
+        Ok(replies)
     }
 
     fn expect_ok(&mut self, body: CommandBody) -> Result<ReplyBody, SimError> {
-        let what = format!("{body:?}");
-        match self.send(body)?.body {
-            ReplyBody::Error(e) => Err(SimError::Mcu {
-                name: self.name.clone(),
-                message: format!(
-                    "{e:?} in reply to {}",
-                    what.chars().take(60).collect::<String>()
-                ),
-            }),
-            other => Ok(other),
-        }
+        let mut replies = self.exchange([body])?;
+        replies
+            .pop()
+            .map(|r| r.body)
+            .ok_or_else(|| self.error("no reply".into()))
     }
 
     fn expect_ack(&mut self, body: CommandBody) -> Result<(), SimError> {
@@ -291,22 +304,17 @@ impl<L: Link> Mcu for FirmwareMcu<L> {
             moment_x_newton_m: 0.0,
             moment_y_newton_m: 0.0,
         };
-        let mut cmds: HVec<Command, 3> = HVec::new();
-        let next = |body: CommandBody, seq: &mut u16| {
-            *seq = seq.wrapping_add(1);
-            Command { seq: *seq, body }
-        };
+        let mut bodies: HVec<CommandBody, 3> = HVec::new();
         if self.last_target != Some(target) || self.load != load {
             let mut v = HVec::new();
             v.push(target)
                 .map_err(|_| SimError::Config("one segment".into()))?;
-            let set = CommandBody::SetTarget(Target {
+            let _ = bodies.push(CommandBody::SetTarget(Target {
                 kind: TargetKind::Configuration(v),
                 load,
-            });
-            let _ = cmds.push(next(set, &mut self.seq));
+            }));
             if self.last_target.is_none() {
-                let _ = cmds.push(next(CommandBody::SetMode(self.mode), &mut self.seq));
+                let _ = bodies.push(CommandBody::SetMode(self.mode));
             }
             self.last_target = Some(target);
             self.load = load;
@@ -318,23 +326,12 @@ impl<L: Link> Mcu for FirmwareMcu<L> {
             imu_quat_q14: quat,
             pressures_pa: s.pressures_pa.iter().map(|p| p.round() as i32).collect(),
         };
-        let _ = cmds.push(next(CommandBody::SensorFrame(frame), &mut self.seq));
+        let _ = bodies.push(CommandBody::SensorFrame(frame));
         self.now_us = self.now_us.wrapping_add(self.period_us);
-        let replies = self.link.exchange_all(&cmds, self.now_us)?;
-        if replies.len() != cmds.len() {
-            return Err(self.unexpected_count(cmds.len(), replies.len()));
-        }
-        for (c, r) in cmds.iter().zip(&replies) {
-            if r.seq != c.seq {
-                return Err(SimError::Mcu {
-                    name: self.name.clone(),
-                    message: format!("reply to command {} answers command {}", c.seq, r.seq),
-                });
-            }
-        }
+        let replies = self.exchange(bodies)?;
         let (last, setup) = replies
             .split_last()
-            .ok_or_else(|| self.unexpected_count(1, 0))?;
+            .ok_or_else(|| self.error("no reply".into()))?;
         if let Some(bad) = setup.iter().find(|r| r.body != ReplyBody::Ack) {
             return Err(self.unexpected(&bad.body));
         }

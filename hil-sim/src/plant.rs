@@ -87,6 +87,22 @@ pub struct PlantParams {
     pub dt_s: f64,
 }
 
+impl PlantParams {
+    /// Moving mass: plate, lumped OCMs and payload, kilograms.
+    pub fn moving_mass_kg(&self, load: &PlateLoad) -> f64 {
+        self.manipulator.plate_mass_kg
+            + 3.0 * f64::from(self.manipulator.ocms_per_column) * self.ocm.mass_kg
+            + load.payload_kg
+    }
+
+    /// Total external force on the plate (gravity of the moving mass plus
+    /// the tip force), base frame, newtons.
+    pub fn external_force_n(&self, load: &PlateLoad) -> [f64; 3] {
+        let w = self.moving_mass_kg(load) * self.mounting.gravity_z();
+        [load.force_n[0], load.force_n[1], load.force_n[2] + w]
+    }
+}
+
 impl Default for PlantParams {
     fn default() -> Self {
         let manipulator = ManipulatorParams::TABLE_3_1;
@@ -322,16 +338,13 @@ impl Plant {
 
     /// Moving mass: plate, lumped OCMs and payload, kilograms.
     pub fn moving_mass_kg(&self, load: &PlateLoad) -> f64 {
-        self.params.manipulator.plate_mass_kg
-            + 3.0 * self.ocms * self.params.ocm.mass_kg
-            + load.payload_kg
+        self.params.moving_mass_kg(load)
     }
 
     /// Total external force on the plate (gravity of the moving mass plus
     /// the tip force), base frame, newtons.
     pub fn external_force_n(&self, load: &PlateLoad) -> [f64; 3] {
-        let w = self.moving_mass_kg(load) * self.params.mounting.gravity_z();
-        [load.force_n[0], load.force_n[1], load.force_n[2] + w]
+        self.params.external_force_n(load)
     }
 
     /// Plate-position Jacobian `dp/dq` (rows x, y, z; columns S, bx, by),

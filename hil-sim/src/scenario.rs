@@ -22,6 +22,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use ocm_lutgen::OcmModel;
+
 use crate::SimError;
 use crate::effects::Effects;
 use crate::mcu::{HostPid, Mcu, McuInput, OpenLoop, Oracle, PidGains, PressureLimits};
@@ -129,7 +131,8 @@ pub fn working_limits(plant: &PlantParams) -> PressureLimits {
         min_pa: plant.regulator.min_pa,
         max_pa: plant.regulator.max_pa,
     };
-    let Ok(p) = Plant::new(*plant, 0) else {
+    // The energy model alone: building a plant would fit its potential.
+    let Ok(model) = OcmModel::new(plant.ocm) else {
         return reg;
     };
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -142,9 +145,9 @@ pub fn working_limits(plant: &PlantParams) -> PressureLimits {
         ],
     };
     for load in [PlateLoad::default(), heaviest] {
-        let tension = p.external_force_n(&load)[2] / 3.0;
+        let tension = plant.external_force_n(&load)[2] / 3.0;
         for eps in [-WORKING_STRAIN, WORKING_STRAIN] {
-            let t = p.model().axial_terms(eps);
+            let t = model.axial_terms(eps);
             let pa = (tension - t.bar_n - t.hinge_n) / t.pressure_n_per_pa;
             lo = lo.min(pa);
             hi = hi.max(pa);

@@ -172,11 +172,13 @@ pub fn run(args: TrackArgs) -> Result<()> {
         }
         _ => None,
     };
-    let image = match &args.lut {
-        Some(path) => {
+    // The host's own controllers need no LUT image.
+    let image = match (&args.lut, &args.mcu) {
+        (_, McuMode::Host) => Vec::new(),
+        (Some(path), _) => {
             std::fs::read(path).with_context(|| format!("reading the LUT {}", path.display()))?
         }
-        None => lut_image(&cfg.plant, &cfg.limits)?,
+        (None, _) => lut_image(&cfg.plant, &cfg.limits)?,
     };
     if !args.json && args.mcu != McuMode::Host {
         println!(
