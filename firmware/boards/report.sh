@@ -42,10 +42,18 @@ report "stm32f4 (STM32F411)" "$rel/ocm-stm32f4"
 
 if [ "${1:-}" != "--no-bench" ]; then
   if command -v qemu-system-arm >/dev/null 2>&1; then
-    echo "bench (QEMU -icount shift=0: 1 instruction = 1 ns of virtual time):"
-    timeout 300 qemu-system-arm -cpu cortex-m4 -machine mps2-an386 -display none -monitor none \
+    echo "bench on the default physics LUT (QEMU -icount shift=0: 1 instruction = 1 ns of virtual time):"
+    # The bench exits non-zero when its setup fails, a tick faults or the
+    # worst tick exceeds 10 000 instructions.
+    if ! timeout 300 qemu-system-arm -cpu cortex-m4 -machine mps2-an386 -display none -monitor none \
       -semihosting-config enable=on,target=native -icount shift=0 \
-      -kernel "$rel/ocm-qemu-bench"
+      -kernel "$rel/ocm-qemu-bench"; then
+      echo "bench FAILED: setup error, faults, or a tick over 10 000 instructions (see above)" >&2
+      exit 1
+    fi
+  elif [ "${OCM_REQUIRE_DATA:-}" = 1 ]; then
+    echo "bench: qemu-system-arm not found and OCM_REQUIRE_DATA=1 (run scripts/setup.sh)" >&2
+    exit 1
   else
     echo "bench skipped: qemu-system-arm not found"
   fi

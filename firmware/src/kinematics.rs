@@ -17,7 +17,7 @@
 //! bending map (eq 3.30-3.31), which shortens the columns on the concave
 //! side as in eq 3.34.
 //!
-//! The `f64` twin of every function lives in [`crate::reference`].
+//! The `f64` twin of every function lives in `ocm_firmware_support::reference`.
 
 use heapless::Vec;
 use ocm_shared::protocol::{Geometry, Load, MAX_SEGMENTS, Mount, SegmentConfig};
@@ -712,28 +712,7 @@ pub fn configs_for_tip(model: &Model, p_q24: [i32; 3]) -> Option<Vec<SegmentConf
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::maps::{LinearOcm, MemoBend};
-    use core::cell::Cell;
     use proptest::prelude::*;
-
-    /// Counts the bending queries that reach the maps.
-    struct Counting {
-        inner: LinearOcm,
-        bends: Cell<u32>,
-    }
-
-    impl OcmMaps for Counting {
-        fn strain(&self, force_q16: i32, pressure_q8: i32) -> Option<i32> {
-            self.inner.strain(force_q16, pressure_q8)
-        }
-        fn force(&self, strain_q16: i32, pressure_q8: i32) -> Option<i32> {
-            self.inner.force(strain_q16, pressure_q8)
-        }
-        fn bend(&self, moment_q24: i32, s_q24: i32, pressure_q8: i32) -> Option<i32> {
-            self.bends.set(self.bends.get() + 1);
-            self.inner.bend(moment_q24, s_q24, pressure_q8)
-        }
-    }
 
     proptest! {
         /// The 64/32 reciprocal equals the 64-bit library division it
@@ -758,45 +737,5 @@ mod tests {
                 prop_assert!((f64::from(mo.sin_q30) / one - angle.sin()).abs() < 1e-6);
             }
         }
-    }
-
-    /// After `prime_bending`, the hinted inverse finds every bending query
-    /// in the memo, and the memo changes none of its results.
-    #[test]
-    fn primed_memo_answers_every_bending_query_of_the_inverse() {
-        let maps = Counting {
-            inner: LinearOcm::SOFT,
-            bends: Cell::new(0),
-        };
-        let model = Model::convert(&crate::app::DEFAULT_GEOMETRY);
-        let load = PreparedLoad::new(&LoadFx {
-            fz_q16: -65_536,
-            mx_q24: 1 << 20,
-            my_q24: -(1 << 19),
-        });
-        let target = [SegmentConfig {
-            backbone_q24: 2_100_000,
-            bend_q28: 80_000_000,
-            direction_q28: 100_000_000,
-        }];
-        let limits = (0, 35_000 << 8);
-        let hint = [12_345 << 8];
-        let plain = inverse_prepared(&maps, &model, &load, &target, limits, Some(&hint));
-        assert!(plain.is_some());
-        let cache = Cell::new([None; 3]);
-        let memo = MemoBend::new(&maps, &cache);
-        let unprimed = maps.bends.get();
-        prime_bending(&memo, &model, &load, &target, &hint);
-        let primed = maps.bends.get();
-        assert_eq!(primed, unprimed + 1, "priming made no bending query");
-        let memoized = inverse_prepared(&memo, &model, &load, &target, limits, Some(&hint));
-        assert_eq!(maps.bends.get(), primed, "the tick missed the primed memo");
-        assert_eq!(memoized, plain);
-        // Without a moment, neither priming nor the inverse query the map.
-        let calm = PreparedLoad::new(&LoadFx::default());
-        let before = maps.bends.get();
-        prime_bending(&memo, &model, &calm, &target, &hint);
-        let _ = inverse_prepared(&memo, &model, &calm, &target, limits, Some(&hint));
-        assert_eq!(maps.bends.get(), before);
     }
 }

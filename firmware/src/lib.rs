@@ -11,7 +11,9 @@
 //! `ocm_shared::protocol` and is generic over a [`app::Board`].
 //!
 //! All arithmetic on the control path is fixed point ([`fx`] lists the
-//! Q-formats); [`reference`] is the `f64` twin of the kinematics.
+//! Q-formats). The `f64` twin of the kinematics, closed-form test maps and
+//! the default physics LUT image for tests live in the host-side crate
+//! `ocm-firmware-support`, outside this API.
 #![no_std]
 #![cfg_attr(
     not(test),
@@ -22,12 +24,10 @@
 extern crate std;
 
 pub mod app;
-pub mod bringup;
 pub mod calibration;
 pub mod control;
 pub mod estimate;
 pub mod fx;
 pub mod kinematics;
 pub mod maps;
-pub mod reference;
 pub mod safety;

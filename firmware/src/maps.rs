@@ -1,11 +1,11 @@
 //! The OCM maps the kinematics need (eq 3.24-3.25, App. A): the inverse
 //! axial map `eps = F_A^-1(F, P)`, the forward axial map `F = F_A(eps, P)` and
 //! the inverse bending map `phi = F_B^-1(M, s, P)`, in fixed point
-//! ([`OcmMaps`]) and in `f64` ([`OcmMapsF64`]).
+//! ([`OcmMaps`]).
 //!
-//! The production implementation is the LUT image of `ocm_shared::lut`;
-//! [`LinearOcm`] is a linear-spring OCM with closed-form maps, used to test
-//! the kinematics independently of any table.
+//! The implementation is the LUT image of `ocm_shared::lut`, with
+//! [`FastLut`] and [`MemoBend`] for the control tick. Host-side maps (the
+//! `f64` twin, closed-form test maps) live in `ocm-firmware-support`.
 
 use ocm_shared::lut::{
     AngleRad, AxialRow, ForceN, LengthM, LutImage, MomentNm, PressurePa, Strain, udiv_u64_by_u32,
@@ -41,25 +41,6 @@ pub trait OcmMaps {
     }
 }
 
-/// The same maps in `f64` SI units (N, Pa, N*m, m, rad).
-pub trait OcmMapsF64 {
-    /// `eps = F_A^-1(F, P)`.
-    fn strain_f64(&self, force_n: f64, pressure_pa: f64) -> Option<f64>;
-    /// `F = F_A(eps, P)`.
-    fn force_f64(&self, strain: f64, pressure_pa: f64) -> Option<f64>;
-    /// `phi = F_B^-1(M, s, P)`.
-    fn bend_f64(&self, moment_nm: f64, s_m: f64, pressure_pa: f64) -> Option<f64>;
-
-    /// The pressure with `F_A(eps, P) = F` by one secant step between `lo`
-    /// and `hi` (exact for a map affine in `P`).
-    fn pressure_for_f64(&self, strain: f64, force_n: f64, lo: f64, hi: f64) -> Option<f64> {
-        let fa = self.force_f64(strain, lo)?;
-        let fb = self.force_f64(strain, hi)?;
-        let p = lo + (force_n - fa) * (hi - lo) / (fb - fa);
-        p.is_finite().then_some(p)
-    }
-}
-
 impl OcmMaps for LutImage<'_> {
     fn strain(&self, force_q16: i32, pressure_q8: i32) -> Option<i32> {
         self.axial_strain(
@@ -87,100 +68,6 @@ impl OcmMaps for LutImage<'_> {
         )
         .ok()
         .map(|l: ocm_shared::lut::Lookup<AngleRad>| l.value.to_bits())
-    }
-}
-
-impl OcmMapsF64 for LutImage<'_> {
-    fn strain_f64(&self, force_n: f64, pressure_pa: f64) -> Option<f64> {
-        self.axial_strain_f64(force_n, pressure_pa)
-            .ok()
-            .map(|l| l.value)
-    }
-
-    fn force_f64(&self, strain: f64, pressure_pa: f64) -> Option<f64> {
-        self.axial_force_f64(strain, pressure_pa)
-            .ok()
-            .map(|l| l.value)
-    }
-
-    fn bend_f64(&self, moment_nm: f64, s_m: f64, pressure_pa: f64) -> Option<f64> {
-        self.bending_angle_f64(moment_nm, s_m, pressure_pa)
-            .ok()
-            .map(|l| l.value)
-    }
-}
-
-/// A linear-spring OCM: `F = k (eps - eps_p P)`, `phi = M / k_b`; strains
-/// are limited to `[-0.9, 1.5]`. Closed form in both arithmetics, so the
-/// kinematics can be checked without a table.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LinearOcm {
-    /// Axial stiffness per unit strain, newtons.
-    pub axial_stiffness_n: f64,
-    /// Free strain per pascal of pressure.
-    pub strain_per_pa: f64,
-    /// Bending stiffness, newton metres per radian.
-    pub bending_stiffness_nm_per_rad: f64,
-}
-
-impl LinearOcm {
-    /// A soft OCM of the size of Table 3.1: 0.5 free strain at 35 kPa.
-    pub const SOFT: Self = Self {
-        axial_stiffness_n: 20.0,
-        strain_per_pa: 0.5 / 35_000.0,
-        bending_stiffness_nm_per_rad: 0.5,
-    };
-
-    const EPS_MIN: f64 = -0.9;
-    const EPS_MAX: f64 = 1.5;
-}
-
-impl OcmMapsF64 for LinearOcm {
-    fn strain_f64(&self, force_n: f64, pressure_pa: f64) -> Option<f64> {
-        let eps = force_n / self.axial_stiffness_n + self.strain_per_pa * pressure_pa;
-        eps.is_finite()
-            .then_some(eps.clamp(Self::EPS_MIN, Self::EPS_MAX))
-    }
-
-    fn force_f64(&self, strain: f64, pressure_pa: f64) -> Option<f64> {
-        let f = self.axial_stiffness_n * (strain - self.strain_per_pa * pressure_pa);
-        f.is_finite().then_some(f)
-    }
-
-    fn bend_f64(&self, moment_nm: f64, _s_m: f64, _pressure_pa: f64) -> Option<f64> {
-        let phi = moment_nm / self.bending_stiffness_nm_per_rad;
-        phi.is_finite().then_some(phi)
-    }
-}
-
-impl OcmMaps for LinearOcm {
-    fn strain(&self, force_q16: i32, pressure_q8: i32) -> Option<i32> {
-        // Q16 force / (N) + (1/Pa Q40) * Pa Q8 -> Q16 strain, all in i64.
-        let inv_k_q32 = crate::fx::from_f64(1.0 / self.axial_stiffness_n, 32);
-        let per_pa_q40 = libm::round(self.strain_per_pa * libm::exp2(40.0)) as i64;
-        let from_force = (i64::from(force_q16) * i64::from(inv_k_q32)) >> 32;
-        let from_p = (per_pa_q40 * i64::from(pressure_q8)) >> 32;
-        let eps = from_force + from_p;
-        let lo = crate::fx::from_f64(Self::EPS_MIN, 16);
-        let hi = crate::fx::from_f64(Self::EPS_MAX, 16);
-        Some(crate::fx::sat(eps).clamp(lo, hi))
-    }
-
-    fn force(&self, strain_q16: i32, pressure_q8: i32) -> Option<i32> {
-        let k_q16 = i64::from(crate::fx::from_f64(self.axial_stiffness_n, 16));
-        let per_pa_q40 = libm::round(self.strain_per_pa * libm::exp2(40.0)) as i64;
-        let free_q16 = (per_pa_q40 * i64::from(pressure_q8)) >> 32;
-        Some(crate::fx::sat(
-            ((i64::from(strain_q16) - free_q16) * k_q16) >> 16,
-        ))
-    }
-
-    fn bend(&self, moment_q24: i32, _s_q24: i32, _pressure_q8: i32) -> Option<i32> {
-        let inv_kb_q24 = i64::from(crate::fx::from_f64(
-            1.0 / self.bending_stiffness_nm_per_rad,
-            24,
-        ));
-        Some(crate::fx::sat((i64::from(moment_q24) * inv_kb_q24) >> 32))
     }
 }
 
@@ -291,20 +178,6 @@ impl OcmMaps for FastLut<'_> {
         };
         let step = div_round_fast(num, f_hi - f_lo)?;
         Some(crate::fx::sat(i64::from(self.p_min_q8) + step))
-    }
-}
-
-impl OcmMapsF64 for FastLut<'_> {
-    fn strain_f64(&self, force_n: f64, pressure_pa: f64) -> Option<f64> {
-        self.image.strain_f64(force_n, pressure_pa)
-    }
-
-    fn force_f64(&self, strain: f64, pressure_pa: f64) -> Option<f64> {
-        self.image.force_f64(strain, pressure_pa)
-    }
-
-    fn bend_f64(&self, moment_nm: f64, s_m: f64, pressure_pa: f64) -> Option<f64> {
-        self.image.bend_f64(moment_nm, s_m, pressure_pa)
     }
 }
 

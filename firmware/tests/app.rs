@@ -4,16 +4,15 @@
 #![allow(clippy::needless_range_loop)]
 
 use ocm_firmware::app::{App, AppConfig};
-use ocm_firmware::bringup;
 use ocm_firmware::fx::{angle_q28_from_rad, from_f64, to_f64};
+use ocm_firmware_support::{bringup, physics};
+use ocm_shared::lut::LUT_CAPACITY;
 use ocm_shared::params::OcmParams;
 use ocm_shared::protocol::*;
 
+/// The default physics image, the one users flash.
 fn lut_image() -> Vec<u8> {
-    let mut buf = vec![0u8; 32 * 1024];
-    let n = bringup::write_image(&OcmParams::TABLE_3_1, &mut buf).unwrap();
-    buf.truncate(n);
-    buf
+    physics::default_image().to_vec()
 }
 
 fn crc32(b: &[u8]) -> u32 {
@@ -108,7 +107,7 @@ fn telemetry(r: ReplyBody) -> Telemetry {
 
 #[test]
 fn modes_are_refused_without_lut_target_or_calibration() {
-    let mut buf = vec![0u8; 32 * 1024];
+    let mut buf = vec![0u8; LUT_CAPACITY];
     let mut h = Host::new(&mut buf);
     assert_eq!(
         h.send(CommandBody::SetMode(Mode::OpenLoop)),
@@ -146,7 +145,7 @@ fn modes_are_refused_without_lut_target_or_calibration() {
 
 #[test]
 fn lut_upload_rejects_bad_sequences_and_keeps_state() {
-    let mut buf = vec![0u8; 32 * 1024];
+    let mut buf = vec![0u8; LUT_CAPACITY];
     let mut h = Host::new(&mut buf);
     let img = lut_image();
     let chunk = |o: usize| CommandBody::LutChunk {
@@ -167,7 +166,7 @@ fn lut_upload_rejects_bad_sequences_and_keeps_state() {
             crc32: 0
         }),
         ReplyBody::Error(ProtocolError::LutTooLarge {
-            capacity: 32 * 1024
+            capacity: LUT_CAPACITY as u32
         })
     );
     h.send(CommandBody::LutBegin {
@@ -225,7 +224,8 @@ fn lut_upload_rejects_bad_sequences_and_keeps_state() {
         ReplyBody::Error(ProtocolError::LutInvalid)
     ));
     // An image for other OCM parameters is refused.
-    let mut other = vec![0u8; 32 * 1024];
+    // (The closed-form bring-up image: any valid image for other parameters.)
+    let mut other = vec![0u8; LUT_CAPACITY];
     let mut p = OcmParams::TABLE_3_1;
     p.layers = 12;
     let n = bringup::write_image(&p, &mut other).unwrap();
@@ -244,7 +244,7 @@ fn lut_upload_rejects_bad_sequences_and_keeps_state() {
 
 #[test]
 fn open_loop_converges_to_the_inverse_model_and_respects_limits() {
-    let mut buf = vec![0u8; 32 * 1024];
+    let mut buf = vec![0u8; LUT_CAPACITY];
     let mut h = Host::new(&mut buf);
     h.upload(&lut_image());
     // Bend 0.3 rad towards column 1 under a 100 g payload.
@@ -290,15 +290,15 @@ fn open_loop_converges_to_the_inverse_model_and_respects_limits() {
     let img = lut_image();
     let lut = ocm_shared::lut::LutImage::parse(&img).unwrap();
     let g = ocm_firmware::app::DEFAULT_GEOMETRY;
-    let mf = ocm_firmware::reference::ModelF64::new(&g);
-    let lf = ocm_firmware::reference::LoadF64::new(&target.load, &mf);
-    let tc = ocm_firmware::reference::ConfigF64 {
+    let mf = ocm_firmware_support::reference::ModelF64::new(&g);
+    let lf = ocm_firmware_support::reference::LoadF64::new(&target.load, &mf);
+    let tc = ocm_firmware_support::reference::ConfigF64 {
         backbone_m: 0.13,
         bend_rad: 0.3,
         direction_rad: 0.0,
     };
     let mut want = [0.0; 9];
-    ocm_firmware::reference::inverse(&lut, &mf, &lf, &[tc], -20_000.0, 35_000.0, &mut want)
+    ocm_firmware_support::reference::inverse(&lut, &mf, &lf, &[tc], -20_000.0, 35_000.0, &mut want)
         .unwrap();
     for i in 0..3 {
         let got = to_f64(last.commanded_pa_q8[i].into(), 8);
@@ -330,7 +330,7 @@ fn open_loop_converges_to_the_inverse_model_and_respects_limits() {
 
 #[test]
 fn watchdog_and_sensor_faults_enter_the_configured_safe_state() {
-    let mut buf = vec![0u8; 32 * 1024];
+    let mut buf = vec![0u8; LUT_CAPACITY];
     let mut h = Host::new(&mut buf);
     h.upload(&lut_image());
     h.send(CommandBody::SetTarget(straight_target(0.14)));
@@ -380,12 +380,12 @@ fn watchdog_and_sensor_faults_enter_the_configured_safe_state() {
 
 #[test]
 fn closed_loop_tracks_a_target_on_a_simulated_plant() {
-    use ocm_firmware::reference as r;
+    use ocm_firmware_support::reference as r;
     let img = lut_image();
     let lut = ocm_shared::lut::LutImage::parse(&img).unwrap();
     let g = ocm_firmware::app::DEFAULT_GEOMETRY;
     let mf = r::ModelF64::new(&g);
-    let mut buf = vec![0u8; 32 * 1024];
+    let mut buf = vec![0u8; LUT_CAPACITY];
     let mut h = Host::new(&mut buf);
     h.upload(&img);
     // Hall sensors: 5 um per code around 0.12 m at code 10000.
@@ -421,7 +421,7 @@ fn closed_loop_tracks_a_target_on_a_simulated_plant() {
         direction_q28: angle_q28_from_rad(target_cfg.direction_rad),
     })
     .unwrap();
-    // The plant carries 100 g more than the model is told: open loop misses,
+    // The plant carries 250 g more than the model is told: open loop misses,
     // closed loop must correct.
     h.send(CommandBody::SetTarget(Target {
         kind: TargetKind::Configuration(v),
@@ -436,7 +436,7 @@ fn closed_loop_tracks_a_target_on_a_simulated_plant() {
     h.send(CommandBody::SetMode(Mode::ClosedLoop));
     let plant_load = r::LoadF64::new(
         &Load {
-            payload_kg: 0.1,
+            payload_kg: 0.25,
             ..Load::default()
         },
         &mf,

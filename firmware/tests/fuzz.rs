@@ -8,8 +8,9 @@
 #![allow(clippy::needless_range_loop)]
 
 use ocm_firmware::app::{App, AppConfig};
-use ocm_firmware::bringup;
 use ocm_firmware::fx::from_f64;
+use ocm_firmware_support::physics;
+use ocm_shared::lut::LUT_CAPACITY;
 use ocm_shared::params::{ManipulatorParams, OcmParams};
 use ocm_shared::protocol::*;
 
@@ -240,9 +241,8 @@ fn calibrations() -> Vec<CommandBody> {
 
 #[test]
 fn one_million_inputs_never_panic_and_never_exceed_limits() {
-    let mut img = vec![0u8; 32 * 1024];
-    let n = bringup::write_image(&OcmParams::TABLE_3_1, &mut img).unwrap();
-    let lut = img[..n].to_vec();
+    // The default physics image, as flashed.
+    let lut = physics::default_image().to_vec();
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&lut);
 
     let mut rng = Rng(0x0c0f_fee5_eed5_2026);
@@ -254,7 +254,7 @@ fn one_million_inputs_never_panic_and_never_exceed_limits() {
     // Several app lifetimes, half of them starting with a loaded LUT and a
     // running controller so that the fuzzer also reaches the control path.
     for life in 0..20u64 {
-        let mut buf = vec![0u8; 32 * 1024];
+        let mut buf = vec![0u8; LUT_CAPACITY];
         let mut app = App::new(&mut buf, AppConfig::default());
         if life.is_multiple_of(2) {
             let mut prelude = vec![CommandBody::LutBegin {

@@ -5,8 +5,9 @@
 
 use ocm_firmware::fx::{angle_q28_from_rad, angle_q28_to_rad, from_f64, to_f64};
 use ocm_firmware::kinematics::{self as k, LoadFx, Model};
-use ocm_firmware::maps::LinearOcm;
-use ocm_firmware::reference::{self as r, ConfigF64, LoadF64, ModelF64};
+use ocm_firmware::maps::OcmMaps;
+use ocm_firmware_support::linear::LinearOcm;
+use ocm_firmware_support::reference::{self as r, ConfigF64, LoadF64, ModelF64};
 use ocm_shared::params::{ManipulatorParams, OcmParams};
 use ocm_shared::protocol::{Geometry, Load, MAX_SEGMENTS, Mount, SegmentConfig};
 use proptest::prelude::*;
@@ -241,4 +242,63 @@ proptest! {
             prop_assert!((full[i] - fast[i]).abs() <= 2, "{:?} vs {:?}", full, fast);
         }
     }
+}
+
+/// Counts the bending queries that reach the maps.
+struct Counting {
+    inner: LinearOcm,
+    bends: std::cell::Cell<u32>,
+}
+
+impl OcmMaps for Counting {
+    fn strain(&self, force_q16: i32, pressure_q8: i32) -> Option<i32> {
+        self.inner.strain(force_q16, pressure_q8)
+    }
+    fn force(&self, strain_q16: i32, pressure_q8: i32) -> Option<i32> {
+        self.inner.force(strain_q16, pressure_q8)
+    }
+    fn bend(&self, moment_q24: i32, s_q24: i32, pressure_q8: i32) -> Option<i32> {
+        self.bends.set(self.bends.get() + 1);
+        self.inner.bend(moment_q24, s_q24, pressure_q8)
+    }
+}
+
+/// After `prime_bending`, the hinted inverse finds every bending query
+/// in the memo, and the memo changes none of its results.
+#[test]
+fn primed_memo_answers_every_bending_query_of_the_inverse() {
+    let maps = Counting {
+        inner: LinearOcm::SOFT,
+        bends: std::cell::Cell::new(0),
+    };
+    let model = Model::convert(&ocm_firmware::app::DEFAULT_GEOMETRY);
+    let load = k::PreparedLoad::new(&LoadFx {
+        fz_q16: -65_536,
+        mx_q24: 1 << 20,
+        my_q24: -(1 << 19),
+    });
+    let target = [SegmentConfig {
+        backbone_q24: 2_100_000,
+        bend_q28: 80_000_000,
+        direction_q28: 100_000_000,
+    }];
+    let limits = (0, 35_000 << 8);
+    let hint = [12_345 << 8];
+    let plain = k::inverse_prepared(&maps, &model, &load, &target, limits, Some(&hint));
+    assert!(plain.is_some());
+    let cache = std::cell::Cell::new([None; 3]);
+    let memo = ocm_firmware::maps::MemoBend::new(&maps, &cache);
+    let unprimed = maps.bends.get();
+    k::prime_bending(&memo, &model, &load, &target, &hint);
+    let primed = maps.bends.get();
+    assert_eq!(primed, unprimed + 1, "priming made no bending query");
+    let memoized = k::inverse_prepared(&memo, &model, &load, &target, limits, Some(&hint));
+    assert_eq!(maps.bends.get(), primed, "the tick missed the primed memo");
+    assert_eq!(memoized, plain);
+    // Without a moment, neither priming nor the inverse query the map.
+    let calm = k::PreparedLoad::new(&LoadFx::default());
+    let before = maps.bends.get();
+    k::prime_bending(&memo, &model, &calm, &target, &hint);
+    let _ = k::inverse_prepared(&memo, &model, &calm, &target, limits, Some(&hint));
+    assert_eq!(maps.bends.get(), before);
 }

@@ -16,9 +16,9 @@ use ocm_firmware::app::{App, AppConfig};
 use ocm_lutgen::OcmModel;
 use ocm_lutgen::tables::{TableConfig, build_tables};
 use ocm_shared::protocol::{
-    CalPoint, Calibration, Command, CommandBody, Gains, Geometry, LUT_CHUNK, Limits, Load, Mode,
-    Mount, Reply, ReplyBody, SafeAction, SafetyConfig, SegmentConfig, SensorFrame, Target,
-    TargetKind,
+    CalPoint, Calibration, Command, CommandBody, Gains, Geometry, Info, LUT_CHUNK, Limits, Load,
+    Mode, Mount, PROTOCOL_VERSION, Reply, ReplyBody, SafeAction, SafetyConfig, SegmentConfig,
+    SensorFrame, Target, TargetKind,
 };
 
 use crate::SimError;
@@ -27,8 +27,8 @@ use crate::pcc::Config;
 use crate::plant::{Mounting, PlantParams};
 use crate::sensors::HallParams;
 
-/// LUT buffer size the boards reserve, bytes.
-pub const LUT_CAPACITY: usize = 32 * 1024;
+/// LUT buffer size the boards reserve, bytes (the one shared constant).
+pub use ocm_shared::lut::LUT_CAPACITY;
 
 /// One request-reply exchange with a firmware instance.
 pub trait Link {
@@ -109,6 +109,26 @@ pub fn lut_image(plant: &PlantParams, limits: &PressureLimits) -> Result<Vec<u8>
         .map_err(|e| SimError::Config(e.to_string()))
 }
 
+/// Refuses a firmware that speaks another protocol revision (its replies
+/// would be misread) or ticks at another rate than the plant steps.
+pub fn check_info(info: &Info, period_us: u32) -> Result<(), SimError> {
+    if info.protocol_version != PROTOCOL_VERSION {
+        let [a, b, c] = info.firmware_version;
+        return Err(SimError::Config(format!(
+            "the firmware (version {a}.{b}.{c}) speaks protocol version {} but this host speaks \
+             version {PROTOCOL_VERSION}: flash a firmware built from the same ocm release",
+            info.protocol_version
+        )));
+    }
+    if info.control_period_us != period_us {
+        return Err(SimError::Config(format!(
+            "the firmware ticks every {} us but the plant steps every {period_us} us (plant.dt_s)",
+            info.control_period_us
+        )));
+    }
+    Ok(())
+}
+
 impl<'a> FirmwareMcu<InProcess<'a>> {
     /// The in-process firmware keeping its LUT in `lut_buf`, set up as
     /// [`FirmwareMcu::new`] does.
@@ -155,15 +175,10 @@ impl<L: Link> FirmwareMcu<L> {
             .to_string(),
         };
         // A board may still run an earlier session: stop it, clear its
-        // latched faults and check it ticks at the plant's rate.
+        // latched faults and check that it speaks this protocol and ticks
+        // at the plant's rate.
         match me.expect_ok(CommandBody::GetInfo)? {
-            ReplyBody::Info(info) if info.control_period_us == period_us => {}
-            ReplyBody::Info(info) => {
-                return Err(SimError::Config(format!(
-                    "the firmware ticks every {} us but the plant steps every {} us (plant.dt_s)",
-                    info.control_period_us, period_us
-                )));
-            }
+            ReplyBody::Info(info) => check_info(&info, period_us)?,
             other => return Err(me.unexpected(&other)),
         }
         me.expect_ack(CommandBody::SetMode(Mode::Idle))?;

@@ -2,7 +2,8 @@
 //!
 //! An [`Mcu`] gets one [`McuInput`] per control tick (the raw sensor sample
 //! a board would see, the reference and the load the operator announced)
-//! and returns the commanded chamber pressures. The firmware, in-process or
+//! and returns the commanded chamber pressures. The plant's hidden state
+//! ([`GroundTruth`]) travels separately and reaches only the [`Oracle`]. The firmware, in-process or
 //! over a serial link, is one implementation; this module provides three
 //! host ones:
 //!
@@ -26,7 +27,8 @@ use crate::plant::{Plant, PlateLoad};
 use crate::reference::Path;
 use crate::sensors::{HallParams, SensorSample};
 
-/// What the controller under test sees at one tick.
+/// What the controller under test sees at one tick: nothing a real
+/// controller could not know.
 #[derive(Debug, Clone, Copy)]
 pub struct McuInput<'a> {
     /// Simulation time, seconds.
@@ -39,10 +41,16 @@ pub struct McuInput<'a> {
     pub target: Config,
     /// Load announced by the operator (what a `SetTarget` would carry).
     pub expected_load: PlateLoad,
-    /// Ground truth, for the oracle only: the true load on the plate.
-    pub true_load: PlateLoad,
-    /// Ground truth, for the oracle only: hysteresis tensions, newtons.
-    pub true_hysteresis_n: [f64; 3],
+}
+
+/// The plant's hidden state at one tick, which only the [`Oracle`] reads:
+/// [`tick`] hands it to the oracle and to no other controller.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct GroundTruth {
+    /// The true load on the plate.
+    pub load: PlateLoad,
+    /// Hysteresis tensions of the columns, newtons.
+    pub hysteresis_n: [f64; 3],
 }
 
 /// A controller under test.
@@ -51,6 +59,24 @@ pub trait Mcu {
     fn name(&self) -> &str;
     /// One control tick: commanded gauge pressures, pascals.
     fn tick(&mut self, input: &McuInput<'_>) -> Result<[f64; 3], SimError>;
+    /// The oracle behind this controller, if it is one: [`tick`] then gives
+    /// it the ground truth. Controllers under test keep the default.
+    fn as_oracle(&mut self) -> Option<&mut Oracle> {
+        None
+    }
+}
+
+/// One control tick of `mcu`: the oracle gets `truth` beside the input,
+/// every other controller only the input.
+pub fn tick(
+    mcu: &mut dyn Mcu,
+    input: &McuInput<'_>,
+    truth: &GroundTruth,
+) -> Result<[f64; 3], SimError> {
+    match mcu.as_oracle() {
+        Some(oracle) => oracle.tick_with_truth(input, truth),
+        None => mcu.tick(input),
+    }
 }
 
 /// Pressure limits every controller clamps into.
@@ -92,23 +118,30 @@ impl Oracle {
         }
     }
 
-    fn holding(&self, t: f64, input: &McuInput<'_>) -> Result<[f64; 3], SimError> {
+    fn holding(
+        &self,
+        t: f64,
+        input: &McuInput<'_>,
+        truth: &GroundTruth,
+    ) -> Result<[f64; 3], SimError> {
         let q = input.reference.config_at(t);
         self.plant
-            .pressures_for(&q, &input.true_load, input.true_hysteresis_n)
-    }
-}
-
-impl Mcu for Oracle {
-    fn name(&self) -> &str {
-        "oracle"
+            .pressures_for(&q, &truth.load, truth.hysteresis_n)
     }
 
-    fn tick(&mut self, input: &McuInput<'_>) -> Result<[f64; 3], SimError> {
+    /// One tick with the plant's ground truth (see [`tick`]).
+    pub fn tick_with_truth(
+        &mut self,
+        input: &McuInput<'_>,
+        truth: &GroundTruth,
+    ) -> Result<[f64; 3], SimError> {
         let r = self.plant.params().regulator;
         let ahead = input.time_s + r.dead_time_s;
         let h = 0.01;
-        let (p0, p1) = match (self.holding(ahead, input), self.holding(ahead + h, input)) {
+        let (p0, p1) = match (
+            self.holding(ahead, input, truth),
+            self.holding(ahead + h, input, truth),
+        ) {
             (Ok(a), Ok(b)) => (a, b),
             // Outside the reachable set: keep the last command.
             _ => return Ok(self.last),
@@ -119,6 +152,23 @@ impl Mcu for Oracle {
             std::array::from_fn(|i| p0[i] + r.time_constant_s * (p1[i] - p0[i]) / h - off[i]);
         self.last = self.limits.clamp(cmd);
         Ok(self.last)
+    }
+}
+
+impl Mcu for Oracle {
+    fn name(&self) -> &str {
+        "oracle"
+    }
+
+    /// Without the ground truth the oracle has nothing to invert.
+    fn tick(&mut self, _input: &McuInput<'_>) -> Result<[f64; 3], SimError> {
+        Err(SimError::Config(
+            "the oracle needs the plant's ground truth: tick it through mcu::tick".into(),
+        ))
+    }
+
+    fn as_oracle(&mut self) -> Option<&mut Oracle> {
+        Some(self)
     }
 }
 
@@ -268,5 +318,70 @@ impl Mcu for HostPid {
             out[i] = unsat;
         }
         Ok(lim.clamp(out))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The ground truth reaches the oracle through [`tick`] and changes its
+    /// command; without it the oracle refuses to run, and a controller
+    /// under test is never handed it.
+    #[test]
+    fn only_the_oracle_reads_the_ground_truth() {
+        let cfg = crate::SimConfig::default();
+        let plant = Plant::new(cfg.plant, 1).expect("plant");
+        // A pose the plant reaches: its rest under mid-range pressures.
+        let mid = 0.5 * (cfg.limits.min_pa + cfg.limits.max_pa);
+        let span = cfg.limits.max_pa - cfg.limits.min_pa;
+        let column_m =
+            f64::from(cfg.plant.manipulator.ocms_per_column) * cfg.plant.ocm.rest_length_m;
+        let guess = Config {
+            backbone_m: column_m,
+            bend_x_rad: 0.0,
+            bend_y_rad: 0.0,
+        };
+        let held = plant
+            .static_equilibrium(
+                [mid - 0.1 * span, mid, mid + 0.1 * span],
+                &PlateLoad::default(),
+                guess,
+            )
+            .expect("rest pose");
+        let path = Path::Hold(held);
+        let sample = SensorSample {
+            hall_codes: [0; 3],
+            imu_quat: [1.0, 0.0, 0.0, 0.0],
+            pressures_pa: [0.0; 3],
+        };
+        let input = McuInput {
+            time_s: 0.0,
+            sensors: &sample,
+            reference: &path,
+            target: path.config_at(0.0),
+            expected_load: PlateLoad::default(),
+        };
+        let calm = GroundTruth::default();
+        let loaded = GroundTruth {
+            load: PlateLoad {
+                payload_kg: 0.1,
+                ..PlateLoad::default()
+            },
+            ..GroundTruth::default()
+        };
+        let mut oracle = Oracle::new(plant.clone(), cfg.limits);
+        assert!(Mcu::tick(&mut oracle, &input).is_err());
+        let a = tick(&mut oracle, &input, &calm).expect("oracle");
+        let b = tick(&mut oracle, &input, &loaded).expect("oracle");
+        assert_ne!(a, b, "the true payload must move the oracle's command");
+        let mut direct = Oracle::new(plant.clone(), cfg.limits);
+        assert_eq!(direct.tick_with_truth(&input, &loaded).expect("oracle"), b);
+
+        let mut open = OpenLoop::new(&plant, true, cfg.limits).expect("open loop");
+        assert!(open.as_oracle().is_none());
+        let c = tick(&mut open, &input, &calm).expect("open loop");
+        let d = tick(&mut open, &input, &loaded).expect("open loop");
+        assert_eq!(c, d);
     }
 }

@@ -17,9 +17,43 @@ use ocm_shared::protocol::{Command, Reply};
 /// The Cortex-M4F target the board is built for.
 pub const TARGET: &str = "thumbv7em-none-eabihf";
 
-/// The repository root this crate was built from.
-pub fn repo_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+/// The environment variable naming the checkout whose `firmware/boards/qemu` is built for PIL.
+pub const SOURCE_DIR_ENV: &str = "OCM_SOURCE_DIR";
+
+/// The checkout holding the board sources: `OCM_SOURCE_DIR`, else the nearest directory at or
+/// above the current one that holds `firmware/boards/qemu/Cargo.toml`. An installed binary
+/// carries no path of the machine it was built on, so a user outside a checkout is told what to
+/// set.
+pub fn repo_root() -> Result<PathBuf, SimError> {
+    let marker = Path::new("firmware/boards/qemu/Cargo.toml");
+    if let Some(dir) = std::env::var_os(SOURCE_DIR_ENV).filter(|v| !v.is_empty()) {
+        let dir = PathBuf::from(dir);
+        return if dir.join(marker).is_file() {
+            Ok(dir)
+        } else {
+            Err(io(
+                &dir,
+                format!(
+                    "{SOURCE_DIR_ENV} names no ocm checkout (no {})",
+                    marker.display()
+                ),
+            ))
+        };
+    }
+    let start = std::env::current_dir().unwrap_or_else(|_| PathBuf::from("."));
+    start
+        .ancestors()
+        .find(|a| a.join(marker).is_file())
+        .map(Path::to_path_buf)
+        .ok_or_else(|| {
+            io(
+                &start,
+                format!(
+                    "the QEMU board is built from an ocm checkout: run from inside one, or set \
+                     {SOURCE_DIR_ENV} to its root"
+                ),
+            )
+        })
 }
 
 fn io(path: &Path, message: String) -> SimError {
@@ -43,7 +77,7 @@ pub fn qemu_available() -> bool {
 /// repository) and returns the ELF's path. Cargo makes this a no-op when
 /// nothing changed.
 pub fn build_board() -> Result<PathBuf, SimError> {
-    let root = repo_root();
+    let root = repo_root()?;
     let board = root.join("firmware/boards/qemu");
     let target_dir = root.join("target-boards");
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());

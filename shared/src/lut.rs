@@ -155,6 +155,15 @@ pub type LengthM = I8F24;
 /// Bending moment in newton-metres: `I8F24`.
 pub type MomentNm = I8F24;
 
+/// Bytes of the firmware's LUT upload buffer, on every board and in every
+/// host that emulates one: the default image ([`defaults::IMAGE_LEN`],
+/// 25 984 bytes) plus a little slack, so that the whole firmware (buffer,
+/// app, stack) stays inside the 32 KiB of RAM of the smallest target. A
+/// larger grid needs a larger board, not a larger constant.
+pub const LUT_CAPACITY: usize = 26 * 1024;
+
+const _: () = assert!(defaults::IMAGE_LEN <= LUT_CAPACITY);
+
 /// Default grids of one OCM type (issue 2): 16 pressure levels of 2 kPa,
 /// 129 strain points over -0.6..0.6, 17 length levels, 129 angle points.
 pub mod defaults {
@@ -174,4 +183,9 @@ pub mod defaults {
     pub const N_S: u16 = 17;
     /// Normalized angle grid points.
     pub const N_U: u16 = 129;
+    /// Bytes of an image on these grids: header, axial table, the length
+    /// levels' largest angles, the two bending planes, CRC.
+    pub const IMAGE_LEN: usize = super::HEADER_LEN
+        + 4 * (N_P as usize * N_EPS as usize + N_S as usize + 2 * N_S as usize * N_U as usize)
+        + 4;
 }

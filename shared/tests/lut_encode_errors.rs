@@ -22,7 +22,7 @@ fn the_writer_needs_a_buffer_large_enough() {
             got: needed - 1
         })
     );
-    let mut budget = vec![0u8; 32 * 1024];
+    let mut budget = vec![0u8; ocm_shared::lut::LUT_CAPACITY];
     assert_eq!(
         encode(0, &tables.axial(), &tables.bending(), &mut budget),
         Ok(needed)

@@ -25,7 +25,11 @@ fn default_image_fits_the_budget_and_carries_hash_and_crc() {
     let len = encoded_len(&tables.axial(), &tables.bending());
     // Header 112 + 4 bytes x (16 x 129 + 17 + 2 x 17 x 129) + CRC 4.
     assert_eq!(len, 112 + 4 * (16 * 129 + 17 + 2 * 17 * 129) + 4);
-    assert!(len <= 32 * 1024, "default image is {len} bytes");
+    assert_eq!(len, defaults::IMAGE_LEN);
+    assert!(
+        len <= ocm_shared::lut::LUT_CAPACITY,
+        "default image is {len} bytes"
+    );
 
     let bytes = tables.encode(OcmParams::TABLE_3_1.hash());
     let lut = LutImage::parse(&bytes).expect("valid image");

@@ -6,17 +6,16 @@
 //! pty, handshakes, uploads a LUT, configures calibration, target and
 //! closed-loop mode, then streams sensor frames and compares every telemetry
 //! reply with an in-process `App` fed the same commands. The LUT is the
-//! closed-form bring-up image (`ocm_firmware::bringup`), built here because
-//! the physics generator's default image is produced elsewhere.
+//! default physics image from `ocm-lutgen`, the one users flash.
 //!
 //! Skips (passing, with a message) when qemu-system-arm or the Cortex-M
 //! target is not installed.
 
 use ocm_firmware::app::{App, AppConfig};
-use ocm_firmware::bringup;
+use ocm_firmware_support::physics;
 use ocm_hilsim::firmware::Link;
 use ocm_hilsim::qemu::{QemuLink, board_for_pil};
-use ocm_shared::params::OcmParams;
+use ocm_shared::lut::LUT_CAPACITY;
 use ocm_shared::protocol::*;
 
 fn setup_commands(img: &[u8]) -> Vec<CommandBody> {
@@ -103,10 +102,8 @@ fn qemu_firmware_matches_in_process_firmware_bit_for_bit() {
     let mut seq = 0u16;
     let mut call = |cmd: &Command| link.exchange(cmd, 0).expect("firmware replies");
 
-    let mut img = vec![0u8; 32 * 1024];
-    let n = bringup::write_image(&OcmParams::TABLE_3_1, &mut img).unwrap();
-    let img = &img[..n];
-    let mut lut_buf = vec![0u8; 26 * 1024];
+    let img = physics::default_image();
+    let mut lut_buf = vec![0u8; LUT_CAPACITY];
     let mut local = App::new(&mut lut_buf, AppConfig::default());
     let mut now = 0u32;
     for body in setup_commands(img) {

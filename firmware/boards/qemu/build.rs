@@ -1,5 +1,6 @@
-//! Puts memory.x where the linker finds it, and writes the bring-up LUT
-//! image that the instruction-count bench embeds.
+//! Puts memory.x where the linker finds it, and writes the default physics
+//! LUT image (`ocm-lutgen`'s defaults, what `ocm lut build` writes and users
+//! flash) that the instruction-count bench embeds.
 use std::{env, fs, path::PathBuf};
 
 fn main() {
@@ -7,8 +8,7 @@ fn main() {
     fs::copy("memory.x", out.join("memory.x")).expect("memory.x is readable");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed=memory.x");
-    let mut img = vec![0u8; 64 * 1024];
-    let n = ocm_firmware::bringup::write_image(&ocm_shared::params::OcmParams::TABLE_3_1, &mut img)
-        .expect("the bring-up model encodes");
-    fs::write(out.join("bringup_lut.bin"), &img[..n]).expect("OUT_DIR is writable");
+    let img = ocm_firmware_support::physics::build_default_image()
+        .unwrap_or_else(|e| panic!("the default LUT image does not build: {e}"));
+    fs::write(out.join("default_lut.bin"), img).expect("OUT_DIR is writable");
 }

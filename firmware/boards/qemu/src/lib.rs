@@ -10,9 +10,8 @@ use ocm_shared::protocol::SensorFrame;
 
 /// Core clock of the AN386 image, Hz.
 pub const CORE_HZ: u32 = 25_000_000;
-/// LUT upload buffer: the default LUT image (25 984 bytes) plus slack,
-/// sized so that the whole firmware fits the 32 KiB RAM budget.
-pub const LUT_CAPACITY: usize = 26 * 1024;
+/// LUT upload buffer, the one capacity every board and host uses.
+pub use ocm_shared::lut::LUT_CAPACITY;
 
 const UART0: usize = 0x4000_4000;
 const DATA: usize = 0x000;

@@ -21,6 +21,7 @@ use ads1x1x::{Ads1x1x, DataRate16Bit, FullScaleRange, TargetAddr, channel, ic, m
 use cortex_m::peripheral::DWT;
 use cortex_m_rt::entry;
 use ocm_firmware::app::{App, AppConfig, Board};
+use ocm_shared::lut::LUT_CAPACITY;
 use ocm_shared::protocol::SensorFrame;
 use panic_halt as _;
 use stm32f4xx_hal::adc::Adc;
@@ -34,7 +35,6 @@ use stm32f4xx_hal::timer::PwmChannel;
 
 const SYSCLK_HZ: u32 = 100_000_000;
 const CONTROL_PERIOD_US: u32 = 4_000;
-const LUT_CAPACITY: usize = 26 * 1024;
 /// Pressure that maps to 0 % and 100 % PWM duty, Pa Q24.8.
 const REG_MIN_Q8: i64 = -20_000 * 256;
 const REG_MAX_Q8: i64 = 35_000 * 256;

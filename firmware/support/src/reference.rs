@@ -1,11 +1,15 @@
-//! `f64` reference twin of [`crate::kinematics`]: the same equations in
-//! floating point and SI units, for the host (simulator, tests) and as the
-//! yardstick of the fixed-point path.
+//! `f64` reference twin of `ocm_firmware::kinematics`: the same equations in
+//! floating point and SI units, the yardstick of the fixed-point path.
+//!
+//! The piecewise-constant-curvature arc-to-tip map lives in one function,
+//! [`segment_pose`]; everything else (forces, strains, column lengths,
+//! eq 3.26) is the firmware's own model.
 
 use ocm_shared::protocol::{Geometry, Load, MAX_SEGMENTS, Mount};
 
-use crate::kinematics::GRAVITY;
-use crate::maps::OcmMapsF64;
+use ocm_firmware::kinematics::GRAVITY;
+
+use crate::maps_f64::OcmMapsF64;
 
 const BETA_COS: [f64; 3] = [1.0, -0.5, -0.5];
 const BETA_SIN: [f64; 3] = [0.0, 0.866_025_403_784_438_6, -0.866_025_403_784_438_6];
@@ -28,7 +32,7 @@ pub struct ModelF64 {
 }
 
 impl ModelF64 {
-    /// From a geometry (no validation: see [`crate::kinematics::Model::new`]).
+    /// From a geometry (no validation: see `ocm_firmware::kinematics::Model::new`).
     pub fn new(g: &Geometry) -> Self {
         let m = &g.manipulator;
         let ocms = f64::from(m.ocms_per_column);
@@ -178,16 +182,19 @@ impl PoseF64 {
     }
 }
 
-fn sinc(x: f64) -> f64 {
-    if libm::fabs(x) < 1e-6 {
-        1.0 - x * x / 6.0
-    } else {
-        libm::sin(x) / x
-    }
-}
-
-/// Top-plate pose of one segment under PCC.
+/// Top-plate pose of one segment under PCC: the arc of length `backbone_m`
+/// bent by `bend_rad` towards `direction_rad`, base frame to tip frame.
+///
+/// The only place the twin evaluates the arc-to-tip map; the host's single
+/// `f64` PCC map can take its place without touching the rest.
 pub fn segment_pose(c: &ConfigF64) -> PoseF64 {
+    fn sinc(x: f64) -> f64 {
+        if libm::fabs(x) < 1e-6 {
+            1.0 - x * x / 6.0
+        } else {
+            libm::sin(x) / x
+        }
+    }
     let (st, ct) = (libm::sin(c.bend_rad), libm::cos(c.bend_rad));
     let (sp, cp) = (libm::sin(c.direction_rad), libm::cos(c.direction_rad));
     let half = c.bend_rad / 2.0;
