@@ -9,7 +9,9 @@
 pub mod config;
 pub mod energy;
 pub mod geometry;
+pub mod hysteresis;
 pub mod model;
+pub mod pcc;
 pub mod scalar;
 pub mod stack;
 pub mod tables;

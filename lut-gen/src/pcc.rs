@@ -1,7 +1,8 @@
-//! Piecewise-constant-curvature kinematics of one segment in the plant's
-//! generalized coordinates.
+//! Piecewise-constant-curvature kinematics of one segment in `f64`: the one
+//! arc-to-tip map of the host (the virtual lab's plant, `ocm ident`, and the
+//! firmware's floating-point twin in its tests all call this one).
 //!
-//! The plant's coordinates are `q = (S, bx, by)`: backbone arc length and
+//! The coordinates are `q = (S, bx, by)`: backbone arc length and
 //! the bending vector `b = theta (cos phi, sin phi)` (the polar PCC
 //! configuration `(S_c, theta_c, phi_c)` of eq 3.26 in Cartesian form). The
 //! columns sit at `beta_i = 0, 120, 240` degrees on radius `d`; `phi` is
@@ -144,4 +145,46 @@ pub fn quat_from_rotvec(v: [f64; 3]) -> [f64; 4] {
     let a = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     let k = 0.5 * sinc(0.5 * a);
     [(0.5 * a).cos(), k * v[0], k * v[1], k * v[2]]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The frame every user of the map shares: column 1 at +x, column 2 at +120 deg; a
+    /// segment bends away from its longest column.
+    #[test]
+    fn frame_is_pinned_column_one_at_plus_x() {
+        let d = 0.06;
+        let c = Config::from_column_lengths([0.13, 0.12, 0.12], d);
+        let p = c.position();
+        assert!(p[0] < -1e-3 && p[1].abs() < 1e-15, "{p:?}");
+        let c = Config::from_column_lengths([0.12, 0.12, 0.13], d);
+        let p = c.position();
+        let dir = p[1].atan2(p[0]).to_degrees();
+        assert!(
+            (dir - 60.0).abs() < 1e-9,
+            "column 3 at -120 deg longest: tip at +60, got {dir}"
+        );
+        // lengths -> configuration -> lengths is the identity
+        let l = c.column_lengths(d);
+        assert!((l[2] - 0.13).abs() < 1e-15 && (l[0] - 0.12).abs() < 1e-15);
+    }
+
+    #[test]
+    fn position_is_the_arc_and_from_position_inverts_it() {
+        let c = Config::from_polar(0.12, 0.7, 2.1);
+        let p = c.position();
+        let r = c.backbone_m / c.bend_rad();
+        // the tip lies on the circle of radius r centred at (r cos phi, r sin phi, 0)
+        let centre = [r * 2.1f64.cos(), r * 2.1f64.sin(), 0.0];
+        let dist = ((p[0] - centre[0]).powi(2) + (p[1] - centre[1]).powi(2) + p[2].powi(2)).sqrt();
+        assert!((dist - r).abs() < 1e-12, "{dist} vs {r}");
+        let back = Config::from_position(p).unwrap();
+        for (a, b) in back.to_array().iter().zip(c.to_array()) {
+            assert!((a - b).abs() < 1e-12, "{a} vs {b}");
+        }
+        assert!(Config::from_position([0.0, 0.0, -1.0]).is_none());
+        assert!(Config::from_position([f64::NAN, 0.0, 1.0]).is_none());
+    }
 }

@@ -482,7 +482,19 @@ fn assumption_sweep_on_a_short_stack() {
     let s = &report.force_deviation_n;
     assert_eq!(s.count, 2);
     assert!(s.max_abs >= s.mean_abs && s.mean_abs > 0.0);
-    assert!(report.neutral_axis_max_deviation_mm >= 0.0);
+    // The summary is the largest neutral-axis change of the bending cases, and there is one.
+    let changes: Vec<f64> = report
+        .bending
+        .iter()
+        .filter_map(|b| b.neutral_axis_change_mm)
+        .collect();
+    assert!(
+        !changes.is_empty(),
+        "no bending case measured the neutral axis"
+    );
+    let largest = changes.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert_eq!(report.neutral_axis_max_deviation_mm, largest);
+    assert!(largest > 0.0, "a bent stack moves its neutral axis");
 }
 
 #[test]

@@ -5,20 +5,10 @@
 //! phi_c)` (eq 3.26) and the piecewise-constant-curvature arc gives the tip position.
 //! This is the host's float version; the firmware carries its own fixed-point one.
 
+use ocm_lutgen::pcc::Config;
 use ocm_shared::params::ManipulatorParams;
 
 use crate::physics::Physics;
-
-/// Configuration of a segment.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Configuration {
-    /// Backbone length `S_c`, metres.
-    pub backbone_m: f64,
-    /// Bending angle `theta_c`, radians.
-    pub bend_rad: f64,
-    /// Direction of the bending axis `phi_c`, radians.
-    pub direction_rad: f64,
-}
 
 /// A quasi-static segment model with a stiffness scale on both `k_b` and `k_h`.
 #[derive(Debug, Clone, Copy)]
@@ -48,33 +38,18 @@ impl<'a> Segment<'a> {
             .axial_strain(force_n, pressure_pa, self.stiffness_scale)
     }
 
-    /// Configuration from the three column strains (eq 3.26 with `l_i = n l0 (1 + eps_i)`).
-    pub fn configuration(&self, strains: [f64; 3]) -> Configuration {
+    /// Configuration from the three column strains (eq 3.26 with `l_i = n l0 (1 + eps_i)`),
+    /// in the lab's frame: column 1 at +x, `phi` from column 1 towards column 2.
+    pub fn configuration(&self, strains: [f64; 3]) -> Config {
         let n = self.geometry.ocms_per_column as f64;
         let l0 = self.physics.params.rest_length_m;
         let l = strains.map(|e| n * l0 * (1.0 + e));
-        let d = self.geometry.column_radius_m;
-        let s = (l[0] + l[1] + l[2]) / 3.0;
-        let q = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2] - l[0] * l[1] - l[1] * l[2] - l[0] * l[2])
-            .max(0.0);
-        let theta = 2.0 * q.sqrt() / (3.0 * d);
-        let phi = (l[2] + l[1] - 2.0 * l[0]).atan2(3f64.sqrt() * (l[1] - l[2]));
-        Configuration {
-            backbone_m: s,
-            bend_rad: theta,
-            direction_rad: phi,
-        }
+        Config::from_column_lengths(l, self.geometry.column_radius_m)
     }
 
     /// Tip position of the constant-curvature arc, metres, z along the unbent backbone.
-    pub fn tip(&self, c: Configuration) -> [f64; 3] {
-        let (s, th, ph) = (c.backbone_m, c.bend_rad, c.direction_rad);
-        let (radial, z) = if th.abs() < 1e-9 {
-            (0.5 * s * th, s)
-        } else {
-            (s / th * (1.0 - th.cos()), s / th * th.sin())
-        };
-        [radial * ph.cos(), radial * ph.sin(), z]
+    pub fn tip(&self, c: Config) -> [f64; 3] {
+        c.position()
     }
 
     /// Tip position for pressures (Pa) and total axial tension on the segment (N).
@@ -105,19 +80,23 @@ mod tests {
     }
 
     #[test]
-    fn arc_tip_matches_geometry_and_bends_away_from_the_longest_column() {
+    fn arc_tip_matches_geometry_and_bends_away_from_the_longest_column_in_the_lab_frame() {
         let p = Physics::table_3_1();
         let seg = Segment::new(p, 1.0);
-        // column 1 longest: phi = atan2(-, 0) = -90 deg, the tip moves along -y
+        // Column 1 sits at +x: when it is the longest, the segment bends towards -x.
         let c = seg.configuration([0.3, 0.0, 0.0]);
         let tip = seg.tip(c);
+        assert!(tip[0] < -1e-3 && tip[1].abs() < 1e-12, "{tip:?}");
         // arc length check: chord relations of a circle of radius S/theta
-        let r = c.backbone_m / c.bend_rad;
+        let r = c.backbone_m / c.bend_rad();
         let radial = (tip[0].powi(2) + tip[1].powi(2)).sqrt();
         assert!(((r - radial).powi(2) + tip[2].powi(2) - r * r).abs() < 1e-12);
         // eq 3.26: theta = 2 sqrt(...) / 3d with l2 = l3 gives 2 (l1 - l2) / 3d
         let l = 0.12 * 0.3;
-        assert!((c.bend_rad - 2.0 * l / (3.0 * 0.06)).abs() < 1e-12);
-        assert!(tip[0].abs() < 1e-12 && tip[1] < 0.0);
+        assert!((c.bend_rad() - 2.0 * l / (3.0 * 0.06)).abs() < 1e-12);
+        // Column 2 (at +120 deg) longest: the tip moves away from it, to 120 - 180 = -60 deg.
+        let tip2 = seg.tip(seg.configuration([0.0, 0.3, 0.0]));
+        let dir = tip2[1].atan2(tip2[0]).to_degrees();
+        assert!((dir - (-60.0)).abs() < 1e-9, "{dir}");
     }
 }
