@@ -2,7 +2,7 @@
 //! and of the plant alone.
 
 use criterion::{Criterion, criterion_main};
-use ocm_hilsim::mcu::{Mcu, McuInput, Oracle, PressureLimits};
+use ocm_hilsim::mcu::{GroundTruth, McuInput, Oracle, PressureLimits};
 use ocm_hilsim::plant::{Plant, PlantParams, PlateLoad};
 use ocm_hilsim::reference::Path;
 use ocm_hilsim::sensors::SensorSample;
@@ -11,8 +11,9 @@ use std::hint::black_box;
 fn bench(c: &mut Criterion) {
     let params = PlantParams::default();
     let plant = Plant::new(params, 1).expect("plant");
+    // The lab's circle: the middle of the calibrated plant's workspace.
     let path = Path::Circle {
-        center_m: [0.0, 0.0, 0.1],
+        center_m: [0.0, 0.0, 0.155],
         radius_m: 0.03,
         period_s: 10.0,
         start_s: 0.0,
@@ -51,10 +52,12 @@ fn bench(c: &mut Criterion) {
                     reference: &path,
                     target: path.config_at(k as f64 * 1e-3),
                     expected_load: load,
-                    true_load: load,
-                    true_hysteresis_n: [0.0; 3],
                 };
-                let cmd = oracle.tick(&input).expect("oracle");
+                let truth = GroundTruth {
+                    load,
+                    hysteresis_n: [0.0; 3],
+                };
+                let cmd = oracle.tick_with_truth(&input, &truth).expect("oracle");
                 plant.step(&mut s, cmd);
             }
             s.q

@@ -27,7 +27,8 @@ pub mod effects;
 pub mod firmware;
 pub mod mcu;
 pub mod metrics;
-pub mod pcc;
+/// The segment's PCC kinematics: the one implementation, in `ocm-lutgen`.
+pub use ocm_lutgen::pcc;
 pub mod plant;
 pub mod pneumatics;
 pub mod potential;

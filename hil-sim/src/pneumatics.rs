@@ -4,7 +4,9 @@
 //! Defaults are of the SMC ITV2030 class the dissertation used (Ch. 3.3.6):
 //! its data sheet gives a response time of about 0.1 s without load; a
 //! 20 ms transport delay plus a 50 ms time constant reach 86 % of a step in
-//! 0.12 s, which matches that figure for the small OCM chambers.
+//! 0.12 s, which matches that figure for the small OCM chambers. Their
+//! range is the 0-30 kPa the dissertation drives them over (16 steps of
+//! 2 kPa, Ch. 3.3.6): a positive-pressure regulator makes no vacuum.
 
 use serde::{Deserialize, Serialize};
 
@@ -27,8 +29,8 @@ impl Default for RegulatorParams {
         Self {
             time_constant_s: 0.05,
             dead_time_s: 0.02,
-            min_pa: -20_000.0,
-            max_pa: 35_000.0,
+            min_pa: 0.0,
+            max_pa: 30_000.0,
         }
     }
 }
@@ -42,6 +44,9 @@ pub struct Regulator {
     head: usize,
     pressure_pa: f64,
     offset_pa: f64,
+    /// `exp(-dt / tau)` for the step `decay_dt_s` it was computed for.
+    decay: f64,
+    decay_dt_s: f64,
 }
 
 impl Regulator {
@@ -54,6 +59,8 @@ impl Regulator {
             head: 0,
             pressure_pa: initial_pa.clamp(params.min_pa, params.max_pa),
             offset_pa,
+            decay: (-dt_s / params.time_constant_s.max(1e-9)).exp(),
+            decay_dt_s: dt_s,
         }
     }
 
@@ -86,7 +93,11 @@ impl Regulator {
         } else {
             0.0_f64.clamp(self.params.min_pa, self.params.max_pa)
         };
-        let a = (-dt_s / self.params.time_constant_s.max(1e-9)).exp();
-        self.pressure_pa = goal + (self.pressure_pa - goal) * a;
+        // The lag's decay over one step, recomputed only when dt changes.
+        if dt_s != self.decay_dt_s {
+            self.decay = (-dt_s / self.params.time_constant_s.max(1e-9)).exp();
+            self.decay_dt_s = dt_s;
+        }
+        self.pressure_pa = goal + (self.pressure_pa - goal) * self.decay;
     }
 }

@@ -20,14 +20,18 @@ use crate::SimError;
 
 /// Largest expansion order in either variable.
 const MAX_ORDER: usize = 32;
+/// Expansion orders in the strain and in `w`: fixed, so that the hot
+/// evaluation works on arrays the compiler unrolls and vectorizes.
+const NX: usize = 20;
+const NY: usize = 8;
+// The contraction over `w` runs two lanes wide.
+const _: () = assert!(NY.is_multiple_of(2) && NX >= 2 && NX <= MAX_ORDER && NY <= MAX_ORDER);
 
 /// A tensor Chebyshev expansion on `[x0, x1] x [y0, y1]`.
 #[derive(Debug, Clone)]
 struct Cheb2 {
     x: (f64, f64),
     y: (f64, f64),
-    nx: usize,
-    ny: usize,
     /// Row-major `c[j * ny + k]` for `T_j(x) T_k(y)`.
     c: Vec<f64>,
 }
@@ -48,21 +52,31 @@ fn basis(t: f64, n: usize, v: &mut [f64; MAX_ORDER], dv: &mut [f64; MAX_ORDER]) 
 }
 
 impl Cheb2 {
-    fn fit(
+    /// Fits two functions at once from one call per node (the energy
+    /// model yields both parts of a point together).
+    fn fit2(
         x: (f64, f64),
         y: (f64, f64),
         nx: usize,
         ny: usize,
-        f: impl Fn(f64, f64) -> f64,
-    ) -> Self {
+        f: impl Fn(f64, f64) -> [f64; 2],
+    ) -> [Self; 2] {
         let node = |k: usize, n: usize| (std::f64::consts::PI * (k as f64 + 0.5) / n as f64).cos();
         let map = |t: f64, (a, b): (f64, f64)| 0.5 * (a + b) + 0.5 * (b - a) * t;
-        let mut vals = vec![0.0; nx * ny];
+        let mut both = [vec![0.0; nx * ny], vec![0.0; nx * ny]];
         for a in 0..nx {
             for b in 0..ny {
-                vals[a * ny + b] = f(map(node(a, nx), x), map(node(b, ny), y));
+                let v = f(map(node(a, nx), x), map(node(b, ny), y));
+                both[0][a * ny + b] = v[0];
+                both[1][a * ny + b] = v[1];
             }
         }
+        both.map(|vals| Self::from_values(x, y, nx, ny, &vals))
+    }
+
+    /// The expansion whose values at the Chebyshev nodes are `vals`
+    /// (`vals[a * ny + b]` at x node `a`, y node `b`).
+    fn from_values(x: (f64, f64), y: (f64, f64), nx: usize, ny: usize, vals: &[f64]) -> Self {
         // cos(j pi (a + 1/2) / n) = T_j at node a, tabulated once.
         let table = |n: usize| -> Vec<f64> {
             (0..n * n)
@@ -86,7 +100,7 @@ impl Cheb2 {
                 c[j * ny + k] = sum * wj * wk / (nx * ny) as f64;
             }
         }
-        Self { x, y, nx, ny, c }
+        Self { x, y, c }
     }
 }
 
@@ -113,8 +127,12 @@ pub struct EnergyGrad {
 /// The Chebyshev representation of one OCM's energy.
 #[derive(Debug, Clone)]
 pub struct OcmPotential {
-    elastic: Cheb2,
-    volume: Cheb2,
+    /// Strain range and `w` range of the expansion.
+    x: (f64, f64),
+    y: (f64, f64),
+    /// Coefficients `[j][k]` of `T_j(x) T_k(y)` in fixed-size rows,
+    /// elastic then volume.
+    coef: Box<[[[f64; NY]; NX]; 2]>,
     rest_length_m: f64,
     layers: u32,
 }
@@ -136,15 +154,22 @@ impl OcmPotential {
             )));
         }
         let w = (0.0, Self::MAX_BEND_RAD * Self::MAX_BEND_RAD);
-        let (nx, ny) = (20, 8);
-        let elastic = Cheb2::fit((lo, hi), w, nx, ny, |e, w| model.energy_j(e, w.sqrt(), 0.0));
-        let volume = Cheb2::fit((lo, hi), w, nx, ny, |e, w| {
-            model.energy_j(e, w.sqrt(), 0.0) - model.energy_j(e, w.sqrt(), 1.0)
+        let (nx, ny) = (NX, NY);
+        let [elastic, volume] = Cheb2::fit2((lo, hi), w, nx, ny, |e, w| {
+            let e0 = model.energy_j(e, w.sqrt(), 0.0);
+            [e0, e0 - model.energy_j(e, w.sqrt(), 1.0)]
         });
         let p = model.params();
+        let mut coef = Box::new([[[0.0; NY]; NX]; 2]);
+        for (t, ch) in coef.iter_mut().zip([&elastic, &volume]) {
+            for (j, row) in t.iter_mut().enumerate() {
+                row.copy_from_slice(&ch.c[j * NY..(j + 1) * NY]);
+            }
+        }
         Ok(Self {
-            elastic,
-            volume,
+            x: elastic.x,
+            y: elastic.y,
+            coef,
             rest_length_m: p.rest_length_m,
             layers: p.layers,
         })
@@ -170,49 +195,64 @@ impl OcmPotential {
     /// of a segment): the bend direction of the expansion is contracted
     /// once.
     pub fn eval3(&self, strains: [f64; 3], w: f64) -> [EnergyGrad; 3] {
-        let c = &self.elastic;
-        let ty = (2.0 * w - c.y.0 - c.y.1) / (c.y.1 - c.y.0);
-        let sx = 2.0 / (c.x.1 - c.x.0);
-        let sy = 2.0 / (c.y.1 - c.y.0);
+        self.eval3_with::<true>(strains, w)
+    }
+
+    /// [`Self::eval3`] without the values (left 0): the gradients are all
+    /// the dynamics needs, and they cost two thirds of the sums.
+    pub fn grad3(&self, strains: [f64; 3], w: f64) -> [EnergyGrad; 3] {
+        self.eval3_with::<false>(strains, w)
+    }
+
+    fn eval3_with<const VALUES: bool>(&self, strains: [f64; 3], w: f64) -> [EnergyGrad; 3] {
+        let (x, y) = (self.x, self.y);
+        let ty = (2.0 * w - y.0 - y.1) / (y.1 - y.0);
+        let sx = 2.0 / (x.1 - x.0);
+        let sy = 2.0 / (y.1 - y.0);
         let (mut vy, mut dvy) = ([0.0; MAX_ORDER], [0.0; MAX_ORDER]);
-        basis(ty, c.ny, &mut vy, &mut dvy);
-        // Per surface and x order: sum_k c_jk T_k(y) and its y-derivative.
-        let contract = |ch: &Cheb2| {
-            let mut a = [0.0; MAX_ORDER];
-            let mut b = [0.0; MAX_ORDER];
-            for j in 0..ch.nx {
-                let row = &ch.c[j * ch.ny..(j + 1) * ch.ny];
-                for k in 0..ch.ny {
-                    a[j] += row[k] * vy[k];
-                    b[j] += row[k] * dvy[k];
-                }
+        basis(ty, NY, &mut vy, &mut dvy);
+        let (vy, dvy): (&[f64; NY], &[f64; NY]) = (
+            vy[..NY].try_into().expect("NY <= MAX_ORDER"),
+            dvy[..NY].try_into().expect("NY <= MAX_ORDER"),
+        );
+        let dot = |a: &[f64; NY], b: &[f64; NY]| {
+            let (mut p, mut q) = (0.0, 0.0);
+            for k in (0..NY).step_by(2) {
+                p += a[k] * b[k];
+                q += a[k + 1] * b[k + 1];
             }
-            (a, b)
+            p + q
         };
-        let (ea, eb) = contract(&self.elastic);
-        let (va, vb) = contract(&self.volume);
+        // Per surface and x order: sum_k c_jk T_k(y) and its y-derivative,
+        // the bend direction contracted once for all three columns.
+        let mut rows = [[0.0; 4]; NX];
+        for (j, r) in rows.iter_mut().enumerate() {
+            let (ce, cv) = (&self.coef[0][j], &self.coef[1][j]);
+            *r = [dot(ce, vy), dot(ce, dvy), dot(cv, vy), dot(cv, dvy)];
+        }
         strains.map(|e| {
-            let tx = (2.0 * e - c.x.0 - c.x.1) / (c.x.1 - c.x.0);
-            // T_j(x) and T_j'(x) by their recurrences, accumulated on the fly.
-            let (mut t0, mut t1, mut d0, mut d1) = (1.0, tx, 0.0, 1.0);
+            let tx = (2.0 * e - x.0 - x.1) / (x.1 - x.0);
+            // T_j(x) and T_j'(x) by their recurrences, accumulated on the
+            // fly: six independent sums per step.
             let mut acc = [0.0; 6];
-            for j in 0..c.nx {
-                let (t, d) = match j {
-                    0 => (t0, d0),
-                    1 => (t1, d1),
-                    _ => {
-                        let t2 = 2.0 * tx * t1 - t0;
-                        let d2 = 2.0 * t1 + 2.0 * tx * d1 - d0;
-                        (t0, t1, d0, d1) = (t1, t2, d1, d2);
-                        (t2, d2)
-                    }
-                };
-                acc[0] += t * ea[j];
-                acc[1] += d * ea[j];
-                acc[2] += t * eb[j];
-                acc[3] += t * va[j];
-                acc[4] += d * va[j];
-                acc[5] += t * vb[j];
+            let mut add = |t: f64, d: f64, r: &[f64; 4]| {
+                if VALUES {
+                    acc[0] += t * r[0];
+                    acc[3] += t * r[2];
+                }
+                acc[1] += d * r[0];
+                acc[2] += t * r[1];
+                acc[4] += d * r[2];
+                acc[5] += t * r[3];
+            };
+            let (mut t0, mut t1, mut d0, mut d1) = (1.0, tx, 0.0, 1.0);
+            add(t0, d0, &rows[0]);
+            add(t1, d1, &rows[1]);
+            for r in &rows[2..] {
+                let t2 = 2.0 * tx * t1 - t0;
+                let d2 = 2.0 * t1 + 2.0 * tx * d1 - d0;
+                add(t2, d2, r);
+                (t0, t1, d0, d1) = (t1, t2, d1, d2);
             }
             EnergyGrad {
                 elastic: PartGrad {

@@ -68,9 +68,15 @@ impl HallParams {
     /// Magnet distance of a column of `ocms` OCMs of length `column_m` bent
     /// by `theta_rad` in all: the chord of one OCM's arc.
     pub fn distance(&self, column_m: f64, theta_rad: f64, ocms: f64) -> f64 {
+        let chord = crate::pcc::sinc(0.5 * theta_rad / ocms);
+        self.distance_with_chord(column_m, chord, ocms)
+    }
+
+    /// [`Self::distance`] with the chord factor `sinc(theta / (2 ocms))`
+    /// already known (it is the same for the three columns).
+    fn distance_with_chord(&self, column_m: f64, chord: f64, ocms: f64) -> f64 {
         let s = column_m / ocms;
-        let half = 0.5 * theta_rad / ocms;
-        let chord_loss = s * (1.0 - crate::pcc::sinc(half));
+        let chord_loss = s * (1.0 - chord);
         s - self.tilt_error_gain * chord_loss
     }
 }
@@ -144,8 +150,10 @@ impl Sensors {
     pub fn sample(&mut self, q: &Config, pressures_pa: [f64; 3]) -> SensorSample {
         let l = q.column_lengths(self.d_m);
         let th = q.bend_rad();
+        // Every column bends by the same angle: one chord factor for all.
+        let chord = crate::pcc::sinc(0.5 * th / self.ocms);
         let hall_codes = std::array::from_fn(|i| {
-            let x = self.hall.distance(l[i], th, self.ocms);
+            let x = self.hall.distance_with_chord(l[i], chord, self.ocms);
             let n: f64 = self.rng.sample(StandardNormal);
             HallParams::code(self.hall.voltage(x) + self.hall.noise_v * n)
         });

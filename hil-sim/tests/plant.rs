@@ -1,6 +1,6 @@
 //! Plant physics against independent references.
 
-use ocm_hilsim::effects::{BoucWen, Effects};
+use ocm_hilsim::effects::{BoucWen, COLUMN_LOOP, Effects};
 use ocm_hilsim::pcc::Config;
 use ocm_hilsim::plant::{Plant, PlantParams, PlateLoad};
 use ocm_hilsim::pneumatics::{Regulator, RegulatorParams};
@@ -64,7 +64,7 @@ fn straight_rest_length_matches_the_inverse_axial_map() {
     // directly on the lut-gen model.
     let p = plant();
     let model = p.model();
-    for (pa, payload) in [(-1_500.0, 0.0), (-2_500.0, 0.25), (-800.0, 0.1)] {
+    for (pa, payload) in [(8_000.0, 0.0), (15_000.0, 0.25), (22_000.0, 0.1)] {
         let load = PlateLoad {
             payload_kg: payload,
             force_n: [0.0; 3],
@@ -92,8 +92,8 @@ fn damped_dynamics_settle_at_the_static_solution() {
         payload_kg: 0.1,
         force_n: [0.3, -0.2, 0.5],
     };
-    let press = [-2_200.0, -1_000.0, -1_600.0];
-    let guess = Config::from_polar(0.12, 0.0, 0.0);
+    let press = [12_000.0, 18_000.0, 15_000.0];
+    let guess = Config::from_polar(0.155, 0.0, 0.0);
     let stat = p.static_equilibrium(press, &load, guess).expect("static");
     let r = p.static_residual(&stat, press, &load, [0.0; 3]);
     assert!(r.iter().all(|v| v.abs() < 1e-8), "residual {r:?}");
@@ -116,10 +116,10 @@ fn exact_inverse_holds_the_target() {
         payload_kg: 0.25,
         force_n: [0.0; 3],
     };
-    let target = Config::from_position([0.02, -0.015, 0.105]).expect("reachable");
+    let target = Config::from_position([0.02, -0.015, 0.150]).expect("reachable");
     let press = p.pressures_for(&target, &load, [0.0; 3]).expect("inverse");
     let q = p
-        .static_equilibrium(press, &load, Config::from_polar(0.1, 0.0, 0.0))
+        .static_equilibrium(press, &load, Config::from_polar(0.15, 0.0, 0.0))
         .expect("static");
     let (a, b) = (target.position(), q.position());
     for k in 0..3 {
@@ -131,9 +131,9 @@ fn exact_inverse_holds_the_target() {
 fn damping_dissipates_mechanical_energy() {
     let p = plant();
     let load = PlateLoad::default();
-    let press = [-1_800.0, -1_200.0, -1_500.0];
+    let press = [14_000.0, 18_000.0, 16_000.0];
     let rest = p
-        .static_equilibrium(press, &load, Config::from_polar(0.12, 0.0, 0.0))
+        .static_equilibrium(press, &load, Config::from_polar(0.155, 0.0, 0.0))
         .expect("static");
     // Released from a displaced pose at rest, with constant pressures.
     let start = Config::from_array([
@@ -212,15 +212,14 @@ fn regulator_step_is_a_delayed_first_order_lag() {
 
 #[test]
 fn bouc_wen_loop_width_is_twice_the_amplitude() {
-    let e = Effects::RIG;
     let mut h = BoucWen::default();
     // Drive 10 yield lengths each way: z saturates at +-1.
     for _ in 0..1_000 {
-        h.step(1e-2 * e.hysteresis_yield_m, e.hysteresis_yield_m);
+        h.step(1e-2, COLUMN_LOOP);
     }
     assert!((h.z - 1.0).abs() < 1e-3, "z {}", h.z);
     for _ in 0..1_000 {
-        h.step(-1e-2 * e.hysteresis_yield_m, e.hysteresis_yield_m);
+        h.step(-1e-2, COLUMN_LOOP);
     }
     assert!((h.z + 1.0).abs() < 1e-3, "z {}", h.z);
 }
@@ -234,15 +233,16 @@ fn hysteresis_opens_a_loop_of_the_set_width() {
     let params = PlantParams {
         effects: Effects {
             hysteresis_fraction: 0.05,
+            hysteresis_reference_n: 10.0,
             ..Effects::NONE
         },
         ..PlantParams::default()
     };
     let p = Plant::new(params, 3).expect("plant");
     let load = PlateLoad::default();
-    let (lo, hi) = (-2_500.0, -500.0);
+    let (lo, hi) = (10_000.0, 20_000.0);
     let q = p
-        .static_equilibrium([lo; 3], &load, Config::from_polar(0.1, 0.0, 0.0))
+        .static_equilibrium([lo; 3], &load, Config::from_polar(0.15, 0.0, 0.0))
         .expect("static");
     let mut s = p.state_at(q, [lo; 3], load);
     let ramp = |s: &mut ocm_hilsim::plant::PlantState, a: f64, b: f64| {
@@ -272,4 +272,37 @@ fn hysteresis_opens_a_loop_of_the_set_width() {
         (gap - expected).abs() < 0.04 * expected,
         "loop gap {gap} m, expected {expected} m"
     );
+}
+
+#[test]
+fn gradient_only_evaluation_matches_the_full_one() {
+    let p = plant();
+    let pot = OcmPotential::new(p.model()).expect("potential");
+    for (strains, w) in [
+        ([-0.6, 0.1, 0.9], 0.0),
+        ([0.2, 0.25, 0.3], 0.04),
+        ([1.1, -0.5, 0.0], 0.2),
+    ] {
+        let (full, grad) = (pot.eval3(strains, w), pot.grad3(strains, w));
+        for (f, g) in full.iter().zip(&grad) {
+            assert_eq!(
+                (
+                    f.elastic.d_strain,
+                    f.elastic.d_w,
+                    f.volume.d_strain,
+                    f.volume.d_w
+                ),
+                (
+                    g.elastic.d_strain,
+                    g.elastic.d_w,
+                    g.volume.d_strain,
+                    g.volume.d_w
+                )
+            );
+        }
+        // And the three-column evaluation is the one-column one.
+        for (i, &e) in strains.iter().enumerate() {
+            assert_eq!(pot.eval(e, w), full[i]);
+        }
+    }
 }

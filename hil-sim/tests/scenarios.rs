@@ -124,11 +124,15 @@ fn closed_loop_rejects_a_step_load_and_open_loop_does_not() {
     let r = run_scenario("step_load", &cfg).expect("run");
     let cl = &r.runs[0].figures;
     let ol = &r.runs[1].figures;
-    // 250 g is a large load for this arm: it moves it by centimetres.
-    assert!(cl["max_deviation_mm"] > 10.0, "{cl:?}");
+    // 250 g (2.45 N over three columns of about 450 N/m) moves the
+    // calibrated arm by millimetres and leaves the open loop there.
+    assert!(ol["final_error_mm"] > 2.0, "{ol:?}");
+    assert!(cl["max_deviation_mm"] > 1.0, "{cl:?}");
     assert!(cl["recovery_s"] < 5.0, "{cl:?}");
-    assert!(cl["final_error_mm"] < 1.0, "{cl:?}");
-    assert!(ol["final_error_mm"] > 10.0, "{ol:?}");
+    assert!(
+        cl["final_error_mm"] < 0.1 * ol["final_error_mm"],
+        "{cl:?} vs {ol:?}"
+    );
     assert_eq!(ol["recovered"], 0.0);
     assert_eq!(cl["recovered"], 1.0);
 }
