@@ -17,18 +17,7 @@ use crate::{FemError, Result};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
-/// Which constitutive law the robot body uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum Law {
-    /// Corotational linear elasticity (as the original SOFA scene).
-    #[default]
-    Corotational,
-    /// Neo-Hookean, eq 2.1.
-    NeoHookean,
-    /// Neo-Hookean, eq 5.6.
-    NeoHookeanBulk,
-}
+pub use crate::material::Law;
 
 /// How the rigid parts (base connectors, top frame) are modelled.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -76,12 +65,15 @@ pub struct BellowsConfig {
 }
 
 impl Default for BellowsConfig {
+    /// The committed material calibration ([`crate::calibration::bellows_material`]) and the
+    /// scene of Ch.4.4.
     fn default() -> Self {
+        let m = crate::calibration::bellows_material();
         BellowsConfig {
-            young_pa: 1.2e6,
-            poisson: 0.45,
-            law: Law::Corotational,
-            density_kg_m3: 1040.0,
+            young_pa: m.young_pa,
+            poisson: m.poisson,
+            law: m.law,
+            density_kg_m3: m.density_kg_m3,
             gravity_m_s2: 0.0,
             rigid: RigidMode::Constraint,
             rigid_factor: 100.0,
@@ -313,17 +305,9 @@ impl Bellows {
         let rot = Rotation3::from_matrix_unchecked(r);
         let top1 = self.top_face.iter().map(|&i| pos[i]).sum::<Vector3<f64>>()
             / self.top_face.len() as f64;
-        let normal = r * Vector3::z();
-        let tcp = top1 + normal * self.config.tcp_offset_mm * 1e-3;
+        let tcp = self.tcp_from(&top1, &r);
         let d = top1 - self.base_center;
-        let horiz = d.xy().norm();
-        let (arc, kappa) = if horiz < 1e-9 {
-            (d.z, 0.0)
-        } else {
-            let k = 2.0 * horiz / (horiz * horiz + d.z * d.z);
-            let theta = 2.0 * horiz.atan2(d.z);
-            (theta / k, k)
-        };
+        let (arc, kappa) = backbone_arc(&d);
         let rv = rot.scaled_axis();
         BellowsState {
             tcp_m: [tcp.x, tcp.y, tcp.z],
@@ -335,6 +319,11 @@ impl Bellows {
         }
     }
 
+    /// The tool-centre point from the top-face centre and the top-plate rotation, m.
+    pub fn tcp_from(&self, top_center: &Vector3<f64>, rotation: &Matrix3<f64>) -> Vector3<f64> {
+        top_center + rotation * Vector3::z() * self.config.tcp_offset_mm * 1e-3
+    }
+
     /// Static solve of one pressure state from rest.
     pub fn solve_kpa(
         &self,
@@ -343,6 +332,19 @@ impl Bellows {
     ) -> Result<(State, StaticReport)> {
         check_pressures(p_kpa)?;
         solver.solve_from_rest(&self.model, &self.loads_kpa(p_kpa))
+    }
+}
+
+/// Constant-curvature backbone through the base centre and the top-face centre, tangent to z at
+/// the base: (arc length m, curvature 1/m) from their offset `d`, m.
+pub fn backbone_arc(d: &Vector3<f64>) -> (f64, f64) {
+    let horiz = d.xy().norm();
+    if horiz < 1e-9 {
+        (d.z, 0.0)
+    } else {
+        let k = 2.0 * horiz / (horiz * horiz + d.z * d.z);
+        let theta = 2.0 * horiz.atan2(d.z);
+        (theta / k, k)
     }
 }
 

@@ -34,6 +34,7 @@ pub mod mesh;
 pub use error::{FemError, Result};
 pub mod bellows;
 pub mod calibrate;
+pub mod calibration;
 pub mod element;
 pub mod material;
 pub mod model;

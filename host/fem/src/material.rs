@@ -184,6 +184,19 @@ pub fn hyperelastic(
     }
 }
 
+/// Which constitutive law a body uses (the bellows manipulator's is stored in its calibration).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum Law {
+    /// Corotational linear elasticity (as the original SOFA scene).
+    #[default]
+    Corotational,
+    /// Neo-Hookean, eq 2.1.
+    NeoHookean,
+    /// Neo-Hookean, eq 5.6.
+    NeoHookeanBulk,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -416,6 +416,12 @@ impl Model {
     pub(crate) fn k0(&self, e: usize) -> Option<&Mat12> {
         self.k0.get(e)
     }
+
+    /// Small-strain stiffness of element `e` that [`crate::element::evaluate`] needs for the
+    /// corotational law (`None` for the hyperelastic laws).
+    pub fn element_k0(&self, e: usize) -> Option<&Mat12> {
+        self.k0(e)
+    }
 }
 
 /// A configuration of the model (positions and velocities, flat DOF vectors).

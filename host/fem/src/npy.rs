@@ -1,4 +1,4 @@
-//! Minimal NumPy .npy writer (format 1.0, little-endian float64, C order).
+//! Minimal NumPy .npy writer and reader (format 1.0, little-endian float64, C order).
 
 use crate::{FemError, Result};
 use std::io::Write;
@@ -52,6 +52,125 @@ pub fn write_snapshots(path: impl AsRef<std::path::Path>, snapshots: &[Vec<f64>]
     })
 }
 
+/// A float64 array read from a .npy file: row-major data and its shape (a 1-D array is `(n, 1)`
+/// with `one_d` set).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Array2 {
+    /// Row-major values.
+    pub data: Vec<f64>,
+    /// Rows.
+    pub rows: usize,
+    /// Columns.
+    pub cols: usize,
+}
+
+/// Parses .npy bytes (versions 1.0-3.0, `<f8`, C order, 1-D or 2-D); `name` labels the errors.
+pub fn parse_f64_2d(bytes: &[u8], name: &str) -> Result<Array2> {
+    let bad = |at: &str, msg: String| FemError::parse("NPY", format!("{name}: {at}"), msg);
+    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+        return Err(bad("magic", "not a .npy file (bad magic string)".into()));
+    }
+    let (hlen, start) = match bytes[6] {
+        1 => (u16::from_le_bytes([bytes[8], bytes[9]]) as usize, 10),
+        2 | 3 if bytes.len() >= 12 => (
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+            12,
+        ),
+        v => return Err(bad("version", format!("unsupported .npy version {v}"))),
+    };
+    let header = bytes
+        .get(start..start + hlen)
+        .ok_or_else(|| bad("header", "file ends inside the header (truncated)".into()))?;
+    let header =
+        std::str::from_utf8(header).map_err(|_| bad("header", "header is not text".into()))?;
+    let field = |key: &str| -> Option<&str> {
+        let at = header.find(&format!("'{key}'"))?;
+        let rest = header[at + key.len() + 2..]
+            .trim_start()
+            .strip_prefix(':')?;
+        Some(rest.trim_start())
+    };
+    let descr = field("descr").ok_or_else(|| bad("header", "no 'descr'".into()))?;
+    if !descr.starts_with("'<f8'") {
+        return Err(bad(
+            "header",
+            format!("dtype {descr:.8} is not little-endian float64 '<f8'"),
+        ));
+    }
+    if !field("fortran_order").is_some_and(|f| f.starts_with("False")) {
+        return Err(bad("header", "Fortran order is not supported".into()));
+    }
+    let shape = field("shape").ok_or_else(|| bad("header", "no 'shape'".into()))?;
+    let inner = shape
+        .strip_prefix('(')
+        .and_then(|s| s.split(')').next())
+        .ok_or_else(|| bad("header", format!("malformed shape {shape:.20}")))?;
+    let dims: Vec<usize> = inner
+        .split(',')
+        .map(str::trim)
+        .filter(|t| !t.is_empty())
+        .map(|t| t.parse::<usize>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| bad("header", format!("shape ({inner}): {e}")))?;
+    let (rows, cols) = match dims[..] {
+        [n] => (n, 1),
+        [r, c] => (r, c),
+        _ => return Err(bad("header", format!("shape ({inner}) is not 1-D or 2-D"))),
+    };
+    let body = &bytes[start + hlen..];
+    let want = rows
+        .checked_mul(cols)
+        .and_then(|n| n.checked_mul(8))
+        .ok_or_else(|| bad("header", format!("shape ({inner}) overflows")))?;
+    if body.len() < want {
+        return Err(bad(
+            "data",
+            format!(
+                "truncated: shape ({inner}) needs {want} data bytes, the file has {}",
+                body.len()
+            ),
+        ));
+    }
+    if body.len() > want {
+        return Err(bad(
+            "data",
+            format!("{} bytes after the ({inner}) array", body.len() - want),
+        ));
+    }
+    let data = body
+        .chunks_exact(8)
+        .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
+        .collect();
+    Ok(Array2 { data, rows, cols })
+}
+
+/// Reads a float64 .npy file (see [`parse_f64_2d`]); errors name the file.
+pub fn read_f64_2d(path: impl AsRef<std::path::Path>) -> Result<Array2> {
+    let path = path.as_ref();
+    let bytes = std::fs::read(path).map_err(|source| FemError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    parse_f64_2d(&bytes, &path.display().to_string())
+}
+
+/// Writes a 2-D float64 array to a file.
+pub fn write_f64_2d_path(
+    path: impl AsRef<std::path::Path>,
+    data: &[f64],
+    rows: usize,
+    cols: usize,
+) -> Result<()> {
+    let path = path.as_ref();
+    let io = |source| FemError::Io {
+        path: path.display().to_string(),
+        source,
+    };
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(io)?);
+    write_f64_2d(&mut f, data, rows, cols)?;
+    f.flush().map_err(io)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -71,5 +190,27 @@ mod tests {
             6.0
         );
         assert!(write_f64_2d(&mut b, &[1.0], 2, 3).is_err());
+    }
+
+    #[test]
+    fn reader_round_trips_and_names_the_problem() {
+        let mut b = Vec::new();
+        write_f64_2d(&mut b, &[1.5, -2.0, 3.25, 4.0, 5.0, 6.0], 3, 2).unwrap();
+        let a = parse_f64_2d(&b, "x.npy").unwrap();
+        assert_eq!((a.rows, a.cols), (3, 2));
+        assert_eq!(a.data, vec![1.5, -2.0, 3.25, 4.0, 5.0, 6.0]);
+        let e = parse_f64_2d(&b[..b.len() - 3], "x.npy")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("x.npy") && e.contains("truncated"), "{e}");
+        let e = parse_f64_2d(b"hello world", "y.npy")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("y.npy") && e.contains("magic"), "{e}");
+        let mut c = b.clone();
+        let at = c.windows(3).position(|w| w == b"<f8").unwrap();
+        c[at + 1] = b'i';
+        let e = parse_f64_2d(&c, "z.npy").unwrap_err().to_string();
+        assert!(e.contains("z.npy") && e.contains("float64"), "{e}");
     }
 }

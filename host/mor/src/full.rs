@@ -1,0 +1,102 @@
+//! The full bellows FEM driven by the random inputs: implicit dynamics (backward Euler, dt from
+//! the drive, Rayleigh damping and density from the scene), the source of snapshots and the
+//! reference the reduced model is measured against.
+
+use crate::drive::Input;
+use crate::{MorError, Result};
+use nalgebra::Vector3;
+use ocm_fem::bellows::{Bellows, check_pressures};
+use ocm_fem::model::{Model, State};
+use ocm_fem::solve::dynamics::{DynamicSolver, Integrator};
+
+/// Distributes a tip force over the top-face nodes in equal parts (a dead load on the top plate).
+pub fn tip_point_forces(top_face: &[usize], force_n: [f64; 3]) -> Vec<(usize, Vector3<f64>)> {
+    let f = Vector3::from(force_n) / top_face.len() as f64;
+    top_face.iter().map(|&i| (i, f)).collect()
+}
+
+/// A running full-model simulation.
+pub struct FullSim<'a> {
+    bellows: &'a Bellows,
+    model: Model,
+    solver: DynamicSolver,
+    /// Current state.
+    pub state: State,
+}
+
+impl<'a> FullSim<'a> {
+    /// Starts at rest.
+    pub fn new(bellows: &'a Bellows) -> Result<Self> {
+        let model = bellows.model.clone();
+        let solver = DynamicSolver::new(&model, Integrator::ImplicitEuler)?;
+        let state = State::at_rest(&model);
+        Ok(FullSim {
+            bellows,
+            model,
+            solver,
+            state,
+        })
+    }
+
+    /// Advances one step of `dt_s` under `input` (held over the step).
+    pub fn step(&mut self, input: &Input, dt_s: f64) -> Result<()> {
+        check_pressures(&input.pressure_kpa)?;
+        self.model.point_forces = tip_point_forces(&self.bellows.top_face, input.tip_force_n);
+        let loads = self.bellows.loads_kpa(&input.pressure_kpa);
+        self.solver
+            .step(&self.model, &mut self.state, &loads, dt_s)
+            .map_err(|e| {
+                MorError::Solve(format!("full model at t = {:.3} s: {e}", self.state.t))
+            })?;
+        Ok(())
+    }
+
+    /// Nodal displacements x - X, flat (3N), m.
+    pub fn displacement(&self) -> Vec<f64> {
+        self.state
+            .x
+            .iter()
+            .zip(self.model.rest.iter().flat_map(|p| [p.x, p.y, p.z]))
+            .map(|(x, r)| x - r)
+            .collect()
+    }
+}
+
+/// One simulated trajectory: displacement snapshots and X_S per step.
+#[derive(Debug, Clone)]
+pub struct Trajectory {
+    /// Displacements after each step (3N each), m.
+    pub displacements: Vec<Vec<f64>>,
+    /// X_S and its rate after each step.
+    pub xs: Vec<[f64; 2 * crate::xs::XS_DIM]>,
+    /// Wall time of the steps, s.
+    pub seconds: f64,
+}
+
+/// Runs the full model over `inputs` from rest.
+pub fn simulate(
+    bellows: &Bellows,
+    inputs: &[Input],
+    dt_s: f64,
+    keep_displacements: bool,
+    mut on_step: impl FnMut(usize),
+) -> Result<Trajectory> {
+    let probe = crate::xs::XsProbe::of_bellows(bellows);
+    let mut sim = FullSim::new(bellows)?;
+    let mut out = Trajectory {
+        displacements: vec![],
+        xs: Vec::with_capacity(inputs.len()),
+        seconds: 0.0,
+    };
+    for (k, inp) in inputs.iter().enumerate() {
+        let t0 = std::time::Instant::now();
+        sim.step(inp, dt_s)?;
+        out.seconds += t0.elapsed().as_secs_f64();
+        if keep_displacements {
+            out.displacements.push(sim.displacement());
+        }
+        out.xs.push(probe.of_full_state(&sim.state));
+        on_step(k);
+    }
+    Ok(out)
+}

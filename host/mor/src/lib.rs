@@ -1,0 +1,23 @@
+//! ocm-mor: model-order reduction of the bellows FEM (dissertation Ch.4.4.5, App. E), the compact
+//! state X_S of Fig 4.3, and the sharded datasets the learned models train on.
+//!
+//! Pipeline: [`drive`] (seeded pressure and tip-force sequences) -> [`full`] (the FEM, snapshots)
+//! -> [`pod`] (randomized SVD basis) -> [`rom`] (Galerkin projection, ECSW hyper-reduction via
+//! [`nnls`], reduced statics and implicit dynamics) -> [`xs`] (X_S of a full or reduced state) ->
+//! [`dataset`] (NPY + JSON manifest, shards). [`store`] keeps bases and reduced models on disk with
+//! their hashes.
+
+#![allow(clippy::needless_range_loop)]
+
+pub mod dataset;
+pub mod drive;
+pub mod error;
+pub mod full;
+pub mod nnls;
+pub mod pod;
+pub mod rom;
+pub mod run;
+pub mod store;
+pub mod xs;
+
+pub use error::{MorError, Result, sha256_f64, sha256_hex};
