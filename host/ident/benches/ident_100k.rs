@@ -3,7 +3,7 @@
 #![allow(missing_docs)]
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use ocm_ident::generator::{Spec, generate};
+use ocm_ident::synth::{Spec, generate};
 use ocm_ident::{Cause, Config, Kind, identify};
 
 fn bench(c: &mut Criterion) {

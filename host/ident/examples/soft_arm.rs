@@ -3,14 +3,13 @@
 //! `cargo run -p ocm-ident --release --example soft_arm -- [OUT_DIR]`.
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let path = ocm_ident::softarm::default_path();
-    if !path.exists() {
-        eprintln!(
-            "SKIP: {} not found (real soft-arm data absent)",
-            path.display()
-        );
-        return Ok(());
-    }
+    let path = match ocm_ident::softarm::default_path(None) {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("SKIP: {e}");
+            return Ok(());
+        }
+    };
     let rec = ocm_ident::softarm::load(&path)?;
     let t0 = std::time::Instant::now();
     let id = ocm_ident::identify(&rec, &ocm_ident::Config::default())?;

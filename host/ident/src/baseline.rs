@@ -10,14 +10,17 @@
 //!   (golden-section search on the training rows), a free z offset (mounting height) and,
 //!   per channel, the stiffness sensitivity as a free regressor (the scale linearised, so that
 //!   extensions refit it jointly).
-//! - `series`: the static affine map `y = A u + b`; a linear-dynamic reference (inputs plus
-//!   first-order-lagged inputs) is reported beside it.
+//! - `series`: the static affine map `y = A u + b`, or a linear state-space model
+//!   ([`crate::statespace`]) for dynamic systems; each is reported beside the other.
+//! - `series` with `sim_` columns: the simulator's prediction, no free parameter.
 
 use crate::data::{Kind, Record};
 use crate::error::IdentError;
 use crate::manipulator::Segment;
 use crate::physics::Physics;
 use crate::signal;
+use crate::statespace::StateSpace;
+use serde::Serialize;
 
 /// The baseline's design for one output channel on a set of input values.
 #[derive(Debug, Clone)]
@@ -61,13 +64,31 @@ pub enum Baseline {
     },
     /// Static affine map.
     Series,
-    /// Linear-dynamic map: inputs and their first-order lags with these time constants.
-    SeriesDynamic(Vec<f64>),
+    /// A user's simulator: its prediction (`sim_<name>` columns) as it is, no free parameter.
+    Simulator,
+    /// Linear state-space model (subspace identification refined on free-run error); the
+    /// output map `C x + D u + d` is fitted per channel.
+    StateSpace(Box<StateSpace>),
+}
+
+/// Which baseline a `series` record without `sim_` columns gets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SeriesModel {
+    /// Static affine map `y = A u + b` (quasi-static systems).
+    Static,
+    /// Linear state-space model (dynamic systems).
+    StateSpace,
 }
 
 impl Baseline {
-    /// Builds (and for pose, fits the nonlinear parameter of) the baseline for a record.
-    pub fn for_record(rec: &Record, train: &[bool]) -> Result<Baseline, IdentError> {
+    /// Builds (and for pose and the state-space model, fits the nonlinear parameters of) the
+    /// baseline for a record.
+    pub fn for_record(
+        rec: &Record,
+        train: &[bool],
+        series: SeriesModel,
+    ) -> Result<Baseline, IdentError> {
         let physics = Physics::table_3_1();
         match rec.kind {
             Kind::Axial => {
@@ -97,8 +118,24 @@ impl Baseline {
                 physics,
                 stiffness_scale: fit_pose_scale(rec, physics, train),
             }),
+            Kind::Series if !rec.simulated.is_empty() => Ok(Baseline::Simulator),
+            Kind::Series if series == SeriesModel::StateSpace => {
+                Ok(Baseline::state_space(rec, train))
+            }
             Kind::Series => Ok(Baseline::Series),
         }
+    }
+
+    /// The linear state-space baseline identified on the training rows of `rec`.
+    pub fn state_space(rec: &Record, train: &[bool]) -> Baseline {
+        let ins: Vec<&[f64]> = rec.inputs.iter().map(|c| c.values.as_slice()).collect();
+        let outs: Vec<&[f64]> = rec.outputs.iter().map(|c| c.values.as_slice()).collect();
+        Baseline::StateSpace(Box::new(StateSpace::identify(
+            &ins,
+            &outs,
+            &rec.segment_starts,
+            train,
+        )))
     }
 
     /// One-line description with the free parameters' meaning.
@@ -116,9 +153,17 @@ impl Baseline {
                 "quasi-static PCC segment (eq 3.26-3.34), fitted stiffness scale {stiffness_scale:.4}, free z offset"
             ),
             Baseline::Series => "static affine map y = A u + b".into(),
-            Baseline::SeriesDynamic(t) => format!(
-                "linear-dynamic map: inputs and their first-order lags (tau = {:?} s)",
-                t.iter().map(|v| (v * 1e3).round() / 1e3).collect::<Vec<_>>()
+            Baseline::Simulator => {
+                "the simulator's prediction (sim_ columns) as given, no free parameter".into()
+            }
+            Baseline::StateSpace(ss) => format!(
+                "linear state-space model of order {} (PO-MOESP, refined on free-run error; order by BIC of the free-run training error: {}), free-run predictions",
+                ss.order(),
+                ss.orders
+                    .iter()
+                    .map(|(n, r, b)| format!("n={n}: RMSE {r:.3e}, BIC {b:.0}"))
+                    .collect::<Vec<_>>()
+                    .join("; ")
             ),
         }
     }
@@ -158,10 +203,27 @@ impl Baseline {
         Some(PoseStates { strains, sens })
     }
 
-    /// The design of output `c` on the given input columns.
-    pub fn design(&self, inputs: &[&[f64]], time_s: &[f64], starts: &[usize], c: usize) -> Design {
+    /// The design of output `c` on the given input columns; `simulated` holds the simulator's
+    /// predictions (used by [`Baseline::Simulator`] only).
+    pub fn design(
+        &self,
+        inputs: &[&[f64]],
+        time_s: &[f64],
+        starts: &[usize],
+        c: usize,
+        simulated: &[crate::data::Channel],
+    ) -> Design {
         let n = time_s.len();
         match self {
+            Baseline::Simulator => Design {
+                fixed: simulated[c].values.clone(),
+                regressors: Vec::new(),
+                names: Vec::new(),
+                stiffness: Vec::new(),
+                // a stiffness change of the simulated structure scales its response
+                fixed_elastic: Some(simulated[c].values.clone()),
+                nonneg: Vec::new(),
+            },
             Baseline::Axial(p) => {
                 let mut fixed = vec![0.0; n];
                 let mut rb = vec![0.0; n];
@@ -239,20 +301,33 @@ impl Baseline {
                     fixed_elastic: Some(el),
                 }
             }
-            Baseline::Series | Baseline::SeriesDynamic(_) => {
+            Baseline::StateSpace(ss) => {
+                let mut regressors = ss.states(inputs, starts);
+                let mut names: Vec<String> = (0..regressors.len())
+                    .map(|j| format!("C[{c}][{j}]"))
+                    .collect();
+                for (k, u) in inputs.iter().enumerate() {
+                    regressors.push(u.to_vec());
+                    names.push(format!("D[{c}][{k}]"));
+                }
+                let mut stiffness = vec![true; regressors.len()];
+                regressors.push(vec![1.0; n]);
+                names.push(format!("d[{c}]"));
+                stiffness.push(false);
+                Design {
+                    fixed: vec![0.0; n],
+                    nonneg: vec![false; regressors.len()],
+                    regressors,
+                    names,
+                    stiffness,
+                    fixed_elastic: None,
+                }
+            }
+            Baseline::Series => {
                 let mut regressors: Vec<Vec<f64>> = inputs.iter().map(|u| u.to_vec()).collect();
                 let mut names: Vec<String> =
                     (0..inputs.len()).map(|k| format!("a[{c}][{k}]")).collect();
                 let mut stiffness = vec![true; inputs.len()];
-                if let Baseline::SeriesDynamic(taus) = self {
-                    for (k, u) in inputs.iter().enumerate() {
-                        for &tau in taus {
-                            regressors.push(signal::lowpass(u, time_s, starts, tau));
-                            names.push(format!("lag{tau:.3}[{c}][{k}]"));
-                            stiffness.push(true);
-                        }
-                    }
-                }
                 regressors.push(vec![1.0; n]);
                 names.push(format!("b[{c}]"));
                 stiffness.push(false);

@@ -26,11 +26,17 @@ pub enum Cause {
     /// A static input-output mismatch that none of the others explain, such as stiffening that
     /// grows with pressure or strain.
     Nonlinearity,
+    /// Dry friction on a moving part: a force that flips with the direction of the velocity
+    /// (Coulomb), grows with speed (viscous) and peaks at breakaway (Stribeck).
+    Friction,
+    /// The model is wrong by many times the noise and no candidate explains it: a verdict, not
+    /// a candidate.
+    Unexplained,
 }
 
 impl Cause {
-    /// Every cause, `None` first.
-    pub const ALL: [Cause; 8] = [
+    /// Every verdict, `None` first.
+    pub const ALL: [Cause; 10] = [
         Cause::None,
         Cause::Hysteresis,
         Cause::RateDependence,
@@ -39,9 +45,12 @@ impl Cause {
         Cause::Offset,
         Cause::Gain,
         Cause::Nonlinearity,
+        Cause::Friction,
+        Cause::Unexplained,
     ];
 
-    /// The causes that have a model extension (all but `None`).
+    /// The causes tried on every record (friction joins them where a record has a position to
+    /// take the velocity of, see `Prepared::candidates`).
     pub const CANDIDATES: [Cause; 7] = [
         Cause::Hysteresis,
         Cause::RateDependence,
@@ -63,6 +72,8 @@ impl Cause {
             Cause::Offset => "offset",
             Cause::Gain => "gain",
             Cause::Nonlinearity => "nonlinearity",
+            Cause::Friction => "friction",
+            Cause::Unexplained => "unexplained",
         }
     }
 
@@ -87,6 +98,12 @@ impl Cause {
             Cause::Nonlinearity => {
                 "a static mismatch the others do not explain, e.g. pressure-dependent stiffening"
             }
+            Cause::Friction => {
+                "dry friction: a force that flips with the direction of motion (Coulomb, viscous, Stribeck)"
+            }
+            Cause::Unexplained => {
+                "the model misses by many times the noise and no candidate explains it"
+            }
         }
     }
 
@@ -105,6 +122,10 @@ impl Cause {
             Cause::Offset => "affine channel correction: output bias plus input-channel biases",
             Cause::Gain => "input-channel scale factors",
             Cause::Nonlinearity => "low-order (complete cubic) polynomial correction in the inputs",
+            Cause::Friction => {
+                "Coulomb level per direction (smoothed sign of the velocity), viscous and Stribeck terms"
+            }
+            Cause::Unexplained => "none",
         }
     }
 
@@ -137,7 +158,9 @@ mod tests {
                 "latency",
                 "offset",
                 "gain",
-                "nonlinearity"
+                "nonlinearity",
+                "friction",
+                "unexplained"
             ]
         );
         for c in Cause::ALL {

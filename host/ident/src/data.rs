@@ -8,7 +8,11 @@
 //! | `axial` | `time_s` (s), `pressure_kpa` (kPa), `strain` (-), `force_n` (N, tension positive) |
 //! | `bending` | `time_s` (s), `strain0` (-), `bend_angle_rad` (rad), `moment_nm` (N m) |
 //! | `pose` | `time_s` (s), `p1_kpa`,`p2_kpa`,`p3_kpa` (kPa), `load_n` (N, axial tension on the segment), `x_mm`,`y_mm`,`z_mm` (mm, tip in the base frame, z along the unbent backbone), optional `qw,qx,qy,qz` (unit quaternion) |
-//! | `series` | `time_s` (s), one or more `u_<name>` inputs, one or more `y_<name>` outputs (any units, named in `<name>`) |
+//! | `series` | `time_s` (s), one or more `u_<name>` inputs, one or more `y_<name>` measured outputs, optional `sim_<name>` (a simulator's prediction of `y_<name>`, one for every output or none) and `x_<name>` (the simulator's states) |
+//!
+//! `series` values stay in the file's units; the unit is read from the name's suffix
+//! (`_n` N, `_nm` N m, `_m` m, `_mm` mm, `_kpa` kPa, `_pa` Pa, `_bar` bar, `_rad` rad,
+//! `_deg` deg, `_s` s, `_v` V), `-` when there is none.
 //!
 //! A row whose `time_s` is smaller than the previous row's starts a new segment (a new trial):
 //! memory operators restart there. Values are converted to SI on reading (kPa to Pa, mm to m).
@@ -97,6 +101,11 @@ pub struct Record {
     pub drives: Vec<usize>,
     /// Rows held out for scoring, when the data comes with its own split (e.g. `val` trials).
     pub held_out: Option<Vec<bool>>,
+    /// A simulator's prediction of each output (same order as `outputs`), or empty: then the
+    /// simulator is the baseline and ident explains measured minus simulated.
+    pub simulated: Vec<Channel>,
+    /// The simulator's states (`x_<name>` columns), extra regressors of the extensions.
+    pub states: Vec<Channel>,
 }
 
 impl Record {
@@ -119,7 +128,21 @@ impl Record {
                 self.source, n
             )));
         }
-        for ch in self.inputs.iter().chain(&self.outputs) {
+        if !self.simulated.is_empty() && self.simulated.len() != self.outputs.len() {
+            return Err(IdentError::Invalid(format!(
+                "{}: {} simulated channels for {} outputs (give a sim_<name> for every y_<name>)",
+                self.source,
+                self.simulated.len(),
+                self.outputs.len()
+            )));
+        }
+        for ch in self
+            .inputs
+            .iter()
+            .chain(&self.outputs)
+            .chain(&self.simulated)
+            .chain(&self.states)
+        {
             if ch.values.len() != n {
                 return Err(IdentError::Invalid(format!(
                     "{}: channel {} has {} values for {} rows",
@@ -221,7 +244,8 @@ pub fn parse_csv(text: &str, file: &str, kind: Kind) -> Result<Record, IdentErro
     // (column index in file, channel name, unit, SI scale)
     let mut inputs: Vec<(usize, &str, &str, f64)> = Vec::new();
     let mut outputs: Vec<(usize, &str, &str, f64)> = Vec::new();
-    let mut series_names: Vec<(usize, String, bool)> = Vec::new();
+    // (column, name, role): role 0 input, 1 output, 2 simulated output, 3 state
+    let mut series_names: Vec<(usize, String, u8)> = Vec::new();
     let mut quat: Vec<usize> = Vec::new();
     match kind {
         Kind::Axial => {
@@ -259,18 +283,57 @@ pub fn parse_csv(text: &str, file: &str, kind: Kind) -> Result<Record, IdentErro
         }
         Kind::Series => {
             for (i, h) in headers.iter().enumerate() {
-                if let Some(n) = h.strip_prefix("u_") {
-                    series_names.push((i, n.to_string(), true));
-                } else if let Some(n) = h.strip_prefix("y_") {
-                    series_names.push((i, n.to_string(), false));
+                for (prefix, role) in [("u_", 0u8), ("y_", 1), ("sim_", 2), ("x_", 3)] {
+                    if let Some(n) = h.strip_prefix(prefix) {
+                        series_names.push((i, n.to_string(), role));
+                    }
                 }
             }
-            if !series_names.iter().any(|s| s.2) || !series_names.iter().any(|s| !s.2) {
+            let has = |r: u8| series_names.iter().any(|s| s.2 == r);
+            if !has(0) || !has(1) {
                 return Err(IdentError::Parse {
                     file: file.to_string(),
                     line: 1,
                     column: String::new(),
                     message: "series needs at least one u_* and one y_* column".into(),
+                });
+            }
+            let names = |r: u8| -> Vec<&str> {
+                series_names
+                    .iter()
+                    .filter(|s| s.2 == r)
+                    .map(|s| s.1.as_str())
+                    .collect()
+            };
+            if has(2) {
+                let (ys, sims) = (names(1), names(2));
+                let unmatched = ys
+                    .iter()
+                    .map(|y| format!("y_{y}"))
+                    .filter(|y| !sims.iter().any(|s| format!("y_{s}") == *y))
+                    .chain(
+                        sims.iter()
+                            .filter(|s| !ys.contains(s))
+                            .map(|s| format!("sim_{s}")),
+                    )
+                    .collect::<Vec<_>>();
+                if !unmatched.is_empty() {
+                    return Err(IdentError::Parse {
+                        file: file.to_string(),
+                        line: 1,
+                        column: unmatched.join(","),
+                        message:
+                            "every measured y_<name> needs its simulated sim_<name> and vice versa"
+                                .into(),
+                    });
+                }
+            } else if has(3) {
+                return Err(IdentError::Parse {
+                    file: file.to_string(),
+                    line: 1,
+                    column: String::new(),
+                    message: "x_* state columns need the simulator's sim_* predictions beside them"
+                        .into(),
                 });
             }
         }
@@ -370,12 +433,26 @@ pub fn parse_csv(text: &str, file: &str, kind: Kind) -> Result<Record, IdentErro
             })
             .collect()
     };
+    let mut simulated = Vec::new();
+    let mut states = Vec::new();
     let (inputs, outputs, drives) = if kind == Kind::Series {
         let mut ins = Vec::new();
         let mut outs = Vec::new();
-        for (j, name, is_in) in &series_names {
-            let ch = Channel::new(name, "file", std::mem::take(&mut cols[*j]));
-            if *is_in { ins.push(ch) } else { outs.push(ch) }
+        let mut sims = Vec::new();
+        for (j, name, role) in &series_names {
+            let ch = Channel::new(name, unit_of(name), std::mem::take(&mut cols[*j]));
+            match role {
+                0 => ins.push(ch),
+                1 => outs.push(ch),
+                2 => sims.push(ch),
+                _ => states.push(ch),
+            }
+        }
+        // simulated channels in the order of the outputs
+        for o in &outs {
+            if let Some(k) = sims.iter().position(|s: &Channel| s.name == o.name) {
+                simulated.push(sims.swap_remove(k));
+            }
         }
         let d = (0..ins.len()).collect();
         (ins, outs, d)
@@ -399,9 +476,35 @@ pub fn parse_csv(text: &str, file: &str, kind: Kind) -> Result<Record, IdentErro
         outputs,
         drives,
         held_out: None,
+        simulated,
+        states,
     };
     rec.validate()?;
     Ok(rec)
+}
+
+/// The unit named by a column name's suffix (`force_n` is in N), `-` when it names none.
+pub fn unit_of(name: &str) -> &'static str {
+    const SUFFIXES: [(&str, &str); 12] = [
+        ("_nm", "N m"),
+        ("_n", "N"),
+        ("_mm", "mm"),
+        ("_m", "m"),
+        ("_kpa", "kPa"),
+        ("_pa", "Pa"),
+        ("_bar", "bar"),
+        ("_rad", "rad"),
+        ("_deg", "deg"),
+        ("_ms", "ms"),
+        ("_s", "s"),
+        ("_v", "V"),
+    ];
+    let lower = name.to_ascii_lowercase();
+    SUFFIXES
+        .iter()
+        .find(|(s, _)| lower.ends_with(s))
+        .map(|(_, u)| *u)
+        .unwrap_or("-")
 }
 
 /// Writes a record as CSV in its kind's schema (file units: kPa, mm).
@@ -455,6 +558,12 @@ pub fn write_csv(rec: &Record, path: &Path) -> Result<(), IdentError> {
                 h.push(format!("y_{}", c.name));
                 s.push((false, i, 1.0));
             }
+            for c in &rec.simulated {
+                h.push(format!("sim_{}", c.name));
+            }
+            for c in &rec.states {
+                h.push(format!("x_{}", c.name));
+            }
             (h, s)
         }
     };
@@ -469,6 +578,9 @@ pub fn write_csv(rec: &Record, path: &Path) -> Result<(), IdentError> {
                 rec.outputs[j].values[i]
             };
             out.push_str(&format!(",{}", v * scale));
+        }
+        for c in rec.simulated.iter().chain(&rec.states) {
+            out.push_str(&format!(",{}", c.values[i]));
         }
         out.push('\n');
     }

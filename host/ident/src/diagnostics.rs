@@ -86,7 +86,26 @@ pub fn variable(prep: &Prepared, cause: Cause, c: usize) -> (Vec<f64>, String) {
             signal::rate(&prep.channels[c].yhat, &rec.time_s, &rec.segment_starts),
             format!("model output rate [{}/s]", rec.outputs[c].unit),
         ),
-        Cause::Offset | Cause::None => (rec.time_s.clone(), "time [s]".into()),
+        Cause::Friction if matches!(prep.baseline, crate::baseline::Baseline::StateSpace(_)) => (
+            prep.model_velocity(c).0,
+            format!(
+                "model d{}/dt [{}/s]",
+                rec.outputs[c].name, rec.outputs[c].unit
+            ),
+        ),
+        Cause::Friction => match prep.velocities().into_iter().next() {
+            Some((name, v, _)) => {
+                let unit = rec
+                    .states
+                    .iter()
+                    .find(|s| s.name == name)
+                    .map(|s| s.unit.clone())
+                    .unwrap_or_default();
+                (v, format!("d{name}/dt [{unit}/s]"))
+            }
+            None => (rec.time_s.clone(), "time [s]".into()),
+        },
+        Cause::Offset | Cause::None | Cause::Unexplained => (rec.time_s.clone(), "time [s]".into()),
         Cause::Gain | Cause::Nonlinearity => (
             prep.channels[c].yhat.clone(),
             format!("model output [{}]", rec.outputs[c].unit),

@@ -7,6 +7,7 @@
 //! scaled so that its *visible* part (what the baseline's free parameters cannot absorb) has
 //! a chosen RMS relative to the white measurement noise. Everything follows from the seed.
 
+use ocm_lutgen::hysteresis::{BoucWen, BoucWenShape};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -186,20 +187,9 @@ pub(crate) fn visible_part(e: &[f64], regs: &[Vec<f64>]) -> Vec<f64> {
     e.iter().zip(&p).map(|(a, b)| a - b).collect()
 }
 
-/// Bouc-Wen-like rate-independent state driven by `x`, saturating at `+-z0`.
+/// Bouc-Wen state driven by `x` (the classic symmetric loop), saturating at `+-z0`.
 pub(crate) fn bouc_wen(x: &[f64], z0: f64) -> Vec<f64> {
-    let mut z = vec![0.0; x.len()];
-    for i in 1..x.len() {
-        let d = x[i] - x[i - 1];
-        let zi = z[i - 1];
-        let dz = if d * zi > 0.0 {
-            d * (1.0 - zi.abs() / z0)
-        } else {
-            d
-        };
-        z[i] = (zi + dz).clamp(-z0, z0);
-    }
-    z
+    BoucWen::series(x, z0, BoucWenShape::SYMMETRIC)
 }
 
 /// The effects that can be hidden in a kind: a cause that the baseline's free parameters
@@ -226,11 +216,10 @@ pub fn hideable(kind: Kind) -> &'static [Cause] {
     }
 }
 
-/// Generates a record for `spec`. Effects not in [`hideable`] for the kind are ignored.
-pub fn generate(spec: &Spec) -> Generated {
-    if spec.kind == Kind::Pose {
-        return crate::pose_generator::generate_pose(spec);
-    }
+/// Generates a record of a scalar kind (`axial`, `bending`, `series`) for `spec`; `pose` has
+/// its own generator and [`crate::synth::generate`] picks the right one. Effects not in
+/// [`hideable`] for the kind are ignored.
+pub fn generate_scalar(spec: &Spec) -> Generated {
     let mut rng = ChaCha8Rng::seed_from_u64(spec.seed);
     let n = spec.rows.max(200);
     let physics = Physics::table_3_1();
@@ -467,7 +456,8 @@ pub fn generate(spec: &Spec) -> Generated {
                 details.push(["secondary^2 * drive", "secondary * drive^2"][form].into());
                 Box::new(move |m| q.iter().map(|v| m * sd * v).collect())
             }
-            Cause::None => Box::new(|_| vec![0.0; n]),
+            // friction needs a moving part these kinds lack; `unexplained` is a verdict
+            Cause::None | Cause::Friction | Cause::Unexplained => Box::new(|_| vec![0.0; n]),
         };
         // bisection on log magnitude for the requested visible ratio
         let target = ratio * noise;
@@ -520,6 +510,8 @@ pub fn generate(spec: &Spec) -> Generated {
             outputs: vec![Channel::new(out_name, out_unit, y)],
             drives,
             held_out: None,
+            simulated: Vec::new(),
+            states: Vec::new(),
         },
         effects,
         ratios,

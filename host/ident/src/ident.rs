@@ -9,6 +9,7 @@ use crate::diagnostics::{self, Diagnostic, Hotspot};
 use crate::error::IdentError;
 use crate::extension::Prepared;
 use crate::select::{self, Candidate, Config};
+use crate::signal;
 use crate::split;
 
 /// A fitted parameter with its standard error.
@@ -33,6 +34,19 @@ pub struct Report {
     pub extended_rmse: f64,
     /// `100 (1 - extended / baseline)`.
     pub gain_pct: f64,
+    /// The verdict in words: what is wrong, by how much against the noise, and where.
+    pub verdict: String,
+    /// Measurement noise RMS estimated from the data (pooled over outputs, RMSE unit).
+    pub noise_rmse: f64,
+    /// How the noise was estimated.
+    pub noise_method: String,
+    /// Held-out RMSE of the extended model over the noise RMS (infinite for noise-free logs).
+    pub residual_to_noise: f64,
+    /// Problems found on the way: ill-conditioned fits kept out of the verdict, records that
+    /// contradict the schema's conventions, residuals the named causes leave unexplained.
+    pub warnings: Vec<String>,
+    /// The schema's conventions for this kind (units, signs, frames, mounting).
+    pub conventions: String,
     /// Every single-cause candidate against the baseline (`score` = -dBIC).
     pub candidates: Vec<Candidate>,
     /// Further causes tried against the extension of the causes named before them.
@@ -51,7 +65,7 @@ pub struct Report {
     pub baseline: String,
     /// Its fitted free parameters.
     pub baseline_params: Vec<Param>,
-    /// Held-out RMSE of the linear-dynamic reference (series only).
+    /// Held-out RMSE of the linear state-space reference (beside a static series baseline).
     pub dynamic_baseline_rmse: Option<f64>,
     /// Extensions fitted for the named causes.
     pub extensions: Vec<String>,
@@ -78,11 +92,39 @@ pub struct Identification {
     pub residual_after: Vec<Vec<f64>>,
     /// Held-out flags.
     pub test: Vec<bool>,
+    /// Sample times, seconds.
+    pub time_s: Vec<f64>,
+    /// Measured output per channel.
+    pub measured: Vec<Vec<f64>>,
+    /// Each channel's loop variable for hysteresis and friction plots: (values, label), the
+    /// first drive (or the state whose velocity friction follows).
+    pub loop_variable: (Vec<f64>, String),
     /// Diagnostic variable (values, label) of each named cause, for channel `plot_channel`.
     pub variables: Vec<(Cause, Vec<f64>, String)>,
     /// The output channel plotted: the one whose held-out squared error the extension
     /// reduces most (0 for single-output records).
     pub plot_channel: usize,
+}
+
+/// Held-out RMSE over noise RMS above which a residual is never "consistent with noise".
+pub const UNEXPLAINED_RATIO: f64 = 3.0;
+
+/// The schema's conventions for a kind, printed in reports and in the CLI help.
+pub fn conventions(kind: Kind) -> &'static str {
+    match kind {
+        Kind::Axial => {
+            "axial: force_n is the axial force on the OCM, tension positive; strain is elongation over rest length (extension positive); pressure_kpa is gauge pressure (inflation positive)"
+        }
+        Kind::Bending => {
+            "bending: strain0 is the initial axial strain set by pressure; bend_angle_rad and moment_nm share their sign (the moment that bends the OCM by a positive angle is positive)"
+        }
+        Kind::Pose => {
+            "pose: tip x_mm, y_mm, z_mm in the base frame of a standing segment, z along the unbent backbone pointing from base to tip (z > 0); load_n is axial tension on the segment; p1..p3_kpa gauge pressures of chambers at 90, 210 and 330 degrees from x (inflation positive). A hanging mount must be rotated into this frame first"
+        }
+        Kind::Series => {
+            "series: u_<name> inputs, y_<name> measured outputs, optional sim_<name> (a simulator's prediction of y_<name>) and x_<name> (its states); values in the file's units, named by the suffix (_n, _m, _mm, _kpa, _pa, _rad, _s); a time that goes backwards starts a new trial"
+        }
+    }
 }
 
 /// Identifies what the baseline gets wrong in `rec`.
@@ -100,7 +142,7 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         )));
     }
     let train: Vec<bool> = test.iter().map(|t| !t).collect();
-    let baseline = Baseline::for_record(rec, &train)?;
+    let baseline = Baseline::for_record(rec, &train, cfg.series_model)?;
     let prep = Prepared::new(rec, baseline.clone(), test.clone());
     let sel = select::select(&prep, cfg);
     let baseline_rmse = select::heldout_rmse(&prep, &sel.baseline.pred);
@@ -110,9 +152,9 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
     } else {
         0.0
     };
-    let dynamic_baseline_rmse = if rec.kind == Kind::Series {
-        let taus = vec![3.0 * prep.dt, 10.0 * prep.dt, 30.0 * prep.dt];
-        let dp = Prepared::new(rec, Baseline::SeriesDynamic(taus), test.clone());
+    // The linear-dynamic reference beside a static series baseline.
+    let dynamic_baseline_rmse = if matches!(baseline, Baseline::Series) {
+        let dp = Prepared::new(rec, Baseline::state_space(rec, &train), test.clone());
         let f = dp.fit_set(&[]);
         Some(select::heldout_rmse(&dp, &f.pred))
     } else {
@@ -137,10 +179,23 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         stiffness_scale, ..
     } = &baseline
     {
+        // the correction regressors are the sensitivity to a relative stiffness change, so
+        // their standard errors (pooled over the channels) are the scale's relative error
+        let info: f64 = prep
+            .channels
+            .iter()
+            .map(|ch| ch.theta_se[0])
+            .filter(|se| *se > 0.0 && se.is_finite())
+            .map(|se| 1.0 / (se * se))
+            .sum();
         baseline_params.push(Param {
             name: "stiffness scale".into(),
             value: *stiffness_scale,
-            std_err: f64::NAN,
+            std_err: if info > 0.0 {
+                stiffness_scale / info.sqrt()
+            } else {
+                f64::INFINITY
+            },
         });
     }
     let named: Vec<Cause> = sel
@@ -173,7 +228,7 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
             (c, v, l)
         })
         .collect();
-    let residual_before = prep
+    let residual_before: Vec<Vec<f64>> = prep
         .channels
         .iter()
         .map(|ch| ch.y.iter().zip(&ch.yhat).map(|(a, b)| a - b).collect())
@@ -205,11 +260,93 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         diagnostics.extend(d);
         hotspots.extend(h);
     }
+    // Noise from the baseline residual's high-frequency content, per channel, pooled like the
+    // RMSE; a model error that is smooth at the sampling rate does not enter it.
+    let noise_rmse = {
+        let ms: f64 = residual_before
+            .iter()
+            .map(|r: &Vec<f64>| signal::noise_sd(r, &rec.segment_starts, &train).powi(2))
+            .sum::<f64>()
+            / residual_before.len().max(1) as f64;
+        ms.sqrt()
+    };
+    let ratio = |rmse: f64| {
+        if noise_rmse > 0.0 {
+            rmse / noise_rmse
+        } else if rmse > 0.0 {
+            f64::INFINITY
+        } else {
+            0.0
+        }
+    };
+    let mut warnings = schema_warnings(rec, &prep);
+    let mut causes = sel.causes.clone();
+    let where_ = hotspots
+        .iter()
+        .max_by(|a, b| a.ratio.total_cmp(&b.ratio))
+        .map(|h| {
+            format!(
+                "largest where {} is in [{:.4}, {:.4}] ({:.2}x the overall RMSE)",
+                h.input, h.from, h.to, h.ratio
+            )
+        })
+        .unwrap_or_default();
+    let base_ill: Vec<String> = prep
+        .channels
+        .iter()
+        .zip(&rec.outputs)
+        .filter(|(ch, _)| ch.ill_conditioned)
+        .map(|(_, o)| o.name.clone())
+        .collect();
+    if !base_ill.is_empty() {
+        warnings.push(format!(
+            "the baseline's fit of {} is ill-conditioned (huge cancelling coefficients): its free parameters are not identified by this record and are not findings",
+            base_ill.join(", ")
+        ));
+    }
+    for c in sel.candidates.iter().filter(|c| c.ill_conditioned) {
+        warnings.push(format!(
+            "the {} extension's fit is ill-conditioned and was kept out of the verdict",
+            c.cause.name()
+        ));
+    }
+    let verdict = if causes == [Cause::None] {
+        if ratio(baseline_rmse) > UNEXPLAINED_RATIO {
+            causes = vec![Cause::Unexplained];
+            format!(
+                "the model is wrong and the discrepancy is unexplained: held-out RMSE {baseline_rmse:.4e} {unit} is {:.1}x the noise ({noise_rmse:.2e} {unit}) and no candidate explains it; {where_}",
+                ratio(baseline_rmse)
+            )
+        } else {
+            format!(
+                "none: the held-out residual ({baseline_rmse:.4e} {unit}) is {:.1}x the noise ({noise_rmse:.2e} {unit}), consistent with it",
+                ratio(baseline_rmse)
+            )
+        }
+    } else {
+        let names: Vec<&str> = causes.iter().map(|c| c.name()).collect();
+        let left = ratio(extended_rmse);
+        if left > UNEXPLAINED_RATIO {
+            warnings.push(format!(
+                "after the extension the held-out residual ({extended_rmse:.4e} {unit}) is still {left:.1}x the noise: the named causes explain {gain_pct:.1} % of the RMSE, the rest is unexplained"
+            ));
+        }
+        format!(
+            "{}: held-out RMSE {baseline_rmse:.4e} -> {extended_rmse:.4e} {unit} ({gain_pct:.1} % gain); residual left {left:.1}x the noise ({noise_rmse:.2e} {unit})",
+            names.join(" + ")
+        )
+    };
     let report = Report {
-        causes: sel.causes.clone(),
+        causes,
         baseline_rmse,
         extended_rmse,
         gain_pct,
+        verdict,
+        noise_rmse,
+        noise_method: "robust second differences of the baseline's training residual (MAD of x[i+1]-2x[i]+x[i-1], divided by sqrt 6), pooled over outputs".into(),
+        residual_to_noise: ratio(extended_rmse),
+        warnings,
+        conventions: conventions(rec.kind).into(),
         candidates: sel.candidates.clone(),
         additions: sel.steps.clone(),
         kind: rec.kind,
@@ -241,7 +378,53 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         residual_before,
         residual_after,
         test,
+        time_s: rec.time_s.clone(),
+        measured: rec.outputs.iter().map(|o| o.values.clone()).collect(),
+        loop_variable: match (rec.states.first(), rec.drives.first()) {
+            (Some(s), _) => (s.values.clone(), format!("{} [{}]", s.name, s.unit)),
+            (None, Some(&k)) => (
+                rec.inputs[k].values.clone(),
+                format!("{} [{}]", rec.inputs[k].name, rec.inputs[k].unit),
+            ),
+            _ => (rec.time_s.clone(), "time [s]".into()),
+        },
         variables,
         plot_channel,
     })
+}
+
+/// Checks a record against its kind's conventions; each finding is a warning.
+fn schema_warnings(rec: &Record, prep: &Prepared) -> Vec<String> {
+    let mut w = Vec::new();
+    // A fitted model that anti-correlates with the measurement in a channel says the record's
+    // frame or sign differs from the schema's (a hanging mount, a flipped axis).
+    for (c, ch) in prep.channels.iter().enumerate() {
+        let r = signal::correlation(&ch.y, &ch.yhat);
+        if r < -0.2 {
+            w.push(format!(
+                "{}: the model's prediction anti-correlates with the measurement (r = {r:.2}): the record's sign or frame contradicts the schema ({})",
+                rec.outputs[c].name,
+                conventions(rec.kind)
+            ));
+        }
+    }
+    if rec.kind == Kind::Pose {
+        let z = &rec.outputs[2].values;
+        let neg = z.iter().filter(|v| **v < 0.0).count();
+        if neg * 2 > z.len() {
+            w.push(format!(
+                "z is negative on {neg} of {} rows: the schema's z points from base to tip of a standing segment (a hanging mount's log must be rotated first)",
+                z.len()
+            ));
+        }
+    }
+    for (o, s) in rec.outputs.iter().zip(&rec.simulated) {
+        if o.values == s.values {
+            w.push(format!(
+                "y_{0} equals sim_{0} on every row: the measured column may be a copy of the simulated one",
+                o.name
+            ));
+        }
+    }
+    w
 }

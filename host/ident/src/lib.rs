@@ -6,8 +6,8 @@
 //! [`manipulator`]) -> compute per-cause residual diagnostics ([`diagnostics`]) -> fit one
 //! model extension per cause and score it on held-out rows ([`extension`]) -> select causes by
 //! held-out gain and an information criterion with a false-discovery guard ([`select`]) ->
-//! report ([`ident`], [`report`]). [`generator`] (with [`pose_generator`] for `pose`) makes
-//! measured-like data with hidden effects.
+//! report ([`ident`], [`report`]). [`synth`] makes measured-like data with hidden effects
+//! ([`generator`] for the scalar kinds, [`pose_generator`] for `pose`).
 
 // Numeric kernels index several parallel arrays by row; iterator chains over four zipped
 // slices read worse than the index.
@@ -15,8 +15,10 @@
 
 pub mod baseline;
 pub mod cause;
+pub mod cylinder;
 pub mod data;
 pub mod diagnostics;
+pub mod dynamic_generator;
 pub mod error;
 pub mod extension;
 pub mod generator;
@@ -31,6 +33,8 @@ pub mod select;
 pub mod signal;
 pub mod softarm;
 pub mod split;
+pub mod statespace;
+pub mod synth;
 
 pub use cause::Cause;
 pub use data::{Channel, Kind, Record};

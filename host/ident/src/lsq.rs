@@ -17,7 +17,14 @@ pub struct LsqFit {
     pub rows: usize,
     /// Number of free (unclamped, non-degenerate) coefficients.
     pub dof_used: usize,
+    /// True when the fit cancels huge terms against each other (the spread of some `coef_j * column_j`
+    /// is more than [`CANCELLATION`] times the target's) or is not finite: its coefficients
+    /// are not identified by the data and must not be reported as findings.
+    pub ill_conditioned: bool,
 }
+
+/// Largest ratio of one term's RMS to the target's RMS before a fit counts as ill-conditioned.
+pub const CANCELLATION: f64 = 1e4;
 
 /// Fits `target ~ sum coef_j * columns[j]` on the rows where `mask` is true.
 /// Columns listed in `nonneg` are constrained to be >= 0 (active-set elimination).
@@ -77,7 +84,6 @@ pub fn fit(columns: &[&[f64]], target: &[f64], mask: &[bool], nonneg: &[bool]) -
             let r = target[i] - pred;
             rss += r * r;
         }
-        let _ = yy;
         let dof_used = idx.len();
         let sigma2 = if n > dof_used {
             rss / (n - dof_used) as f64
@@ -88,12 +94,26 @@ pub fn fit(columns: &[&[f64]], target: &[f64], mask: &[bool], nonneg: &[bool]) -
         for (k, &j) in idx.iter().enumerate() {
             std_err[j] = (sigma2 * inv_diag[k]).max(0.0).sqrt();
         }
+        // centred: an un-centred column (a pressure of 1e5 Pa beside an intercept) is a
+        // benign representation, a huge varying term is not
+        let nf = n.max(1) as f64;
+        let mean_of = |x: &[f64]| rows.iter().map(|&i| x[i]).sum::<f64>() / nf;
+        let ty = mean_of(target);
+        let target_var = (yy / nf - ty * ty).max(0.0);
+        let ill_conditioned = !rss.is_finite()
+            || coef.iter().chain(&std_err).any(|v| !v.is_finite())
+            || idx.iter().any(|&j| {
+                let m = mean_of(columns[j]);
+                let var = (g[(j, j)] / nf - m * m).max(0.0);
+                coef[j] * coef[j] * var > CANCELLATION * CANCELLATION * target_var.max(1e-300)
+            });
         return LsqFit {
             coef,
             std_err,
             rss,
             rows: n,
             dof_used,
+            ill_conditioned,
         };
     }
 }
@@ -182,6 +202,22 @@ mod tests {
         let r = fit(&[&x1], &y, &mask, &[]);
         assert!((c.coef[0] - r.coef[0]).abs() < 1e-12);
         assert!((c.rss - r.rss).abs() < 1e-9 * r.rss.max(1.0));
+    }
+
+    #[test]
+    fn nearly_collinear_columns_are_flagged_ill_conditioned() {
+        let n = 300;
+        let x1: Vec<f64> = (0..n).map(|i| (i as f64 * 0.05).sin()).collect();
+        // a second column equal to the first up to a tiny difference that the target needs:
+        // the fit cancels two coefficients of about 1e5
+        let d: Vec<f64> = (0..n).map(|i| [1.0, -0.5, -0.5][i % 3]).collect();
+        let x2: Vec<f64> = (0..n).map(|i| x1[i] + 1e-5 * d[i]).collect();
+        let y: Vec<f64> = (0..n).map(|i| x1[i] + d[i]).collect();
+        let mask = vec![true; n];
+        let bad = fit(&[&x1, &x2], &y, &mask, &[]);
+        assert!(bad.ill_conditioned, "{:?}", bad.coef);
+        let good = fit(&[&x1, &d], &y, &mask, &[]);
+        assert!(!good.ill_conditioned && (good.coef[1] - 1.0).abs() < 1e-9);
     }
 
     #[test]

@@ -270,7 +270,10 @@ pub(crate) fn generate_pose(spec: &Spec) -> Generated {
                     minus(&tips(physics, &e, z_off), &y0c)
                 })
             }
-            Cause::None => Box::new(move |_| vec![0.0; 3 * n]),
+            // friction needs a moving part these kinds lack; `unexplained` is a verdict
+            Cause::None | Cause::Friction | Cause::Unexplained => {
+                Box::new(move |_| vec![0.0; 3 * n])
+            }
         };
         let target = ratio * noise;
         let (mut lo, mut hi) = (-8.0f64, 3.0f64);
@@ -317,6 +320,8 @@ pub(crate) fn generate_pose(spec: &Spec) -> Generated {
             ],
             drives: vec![0, 1, 2],
             held_out: None,
+            simulated: Vec::new(),
+            states: Vec::new(),
         },
         effects,
         ratios,

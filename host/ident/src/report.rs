@@ -37,6 +37,7 @@ pub fn text(r: &Report) -> String {
         r.rows[2],
         r.split
     ));
+    s.push_str(&format!("conventions: {}\n", r.conventions));
     s.push_str(&format!("baseline: {}\n", r.baseline));
     for p in &r.baseline_params {
         s.push_str(&format!(
@@ -59,7 +60,15 @@ pub fn text(r: &Report) -> String {
             h.input, h.from, h.to, h.rmse, h.ratio
         ));
     }
+    s.push_str(&format!(
+        "  noise RMS estimated from the data: {:.3e} {u} ({})\n",
+        r.noise_rmse, r.noise_method
+    ));
     s.push_str(&format!("\ncause(s): {}\n", causes_line(r)));
+    s.push_str(&format!("verdict: {}\n", r.verdict));
+    for w in &r.warnings {
+        s.push_str(&format!("warning: {w}\n"));
+    }
     for c in &r.causes {
         s.push_str(&format!("  {}: {}\n", c.name(), c.definition()));
     }
@@ -72,7 +81,13 @@ pub fn text(r: &Report) -> String {
             c.score,
             c.p_value,
             c.t_stat,
-            if c.accepted { "passes" } else { "" }
+            if c.accepted {
+                "passes"
+            } else if c.ill_conditioned {
+                "ill-conditioned"
+            } else {
+                ""
+            }
         ));
     }
     s.push_str("\nevidence (residual diagnostics on held-out rows):\n");
@@ -126,6 +141,16 @@ pub fn markdown(r: &Report, plots: &[PathBuf]) -> String {
         r.gain_pct
     ));
     s.push_str(&format!(
+        "Verdict: {}\n\nNoise RMS estimated from the data: {:.3e} {} ({}). Conventions: {}.\n\n",
+        r.verdict, r.noise_rmse, r.unit, r.noise_method, r.conventions
+    ));
+    for w in &r.warnings {
+        s.push_str(&format!("- **warning**: {w}\n"));
+    }
+    if !r.warnings.is_empty() {
+        s.push('\n');
+    }
+    s.push_str(&format!(
         "## Baseline\n\n{}\n\n| parameter | value | std. error |\n|---|---|---|\n",
         r.baseline
     ));
@@ -150,7 +175,7 @@ pub fn markdown(r: &Report, plots: &[PathBuf]) -> String {
             h.input, h.from, h.to, h.rmse, h.ratio
         ));
     }
-    s.push_str("\n## Candidates\n\nScore is -dBIC on training rows; a cause passes with dBIC below -margin, held-out gain above the minimum and an F-test p-value below alpha / 7.\n\n| cause | definition | held-out gain % | score | F p-value | HAC t | passes |\n|---|---|---|---|---|---|---|\n");
+    s.push_str("\n## Candidates\n\nScore is -dBIC on training rows; a cause passes with dBIC below -margin, held-out gain above the minimum and an F-test p-value below alpha / (number of candidates); an ill-conditioned fit never passes.\n\n| cause | definition | held-out gain % | score | F p-value | HAC t | passes |\n|---|---|---|---|---|---|---|\n");
     for c in &r.candidates {
         s.push_str(&format!(
             "| {} | {} | {:.2} | {:.1} | {:.2e} | {:.2} | {} |\n",
@@ -217,8 +242,11 @@ fn register_font() {
     });
 }
 
-/// Writes one PNG per named cause: held-out residual (of the output channel the extension
-/// improves most) against the cause's diagnostic variable, before (grey) and after (blue).
+/// Writes the plots: first `timeline.png` (measured, baseline and extended model over time on a
+/// held-out window), then per named cause the held-out residual (of the output channel the
+/// extension improves most) against the cause's diagnostic variable, before (grey) and after
+/// (blue), and for hysteresis and friction the loops (output against the drive or the moving
+/// state: measured, baseline, extended).
 pub fn plots(id: &Identification, dir: &Path) -> Result<Vec<PathBuf>, IdentError> {
     register_font();
     let mut out = Vec::new();
@@ -227,6 +255,66 @@ pub fn plots(id: &Identification, dir: &Path) -> Result<Vec<PathBuf>, IdentError
     let step = (rows.len() / 5000).max(1);
     let rows: Vec<usize> = rows.into_iter().step_by(step).collect();
     let pc = id.plot_channel;
+    let unit = &id.report.unit;
+    let y = &id.measured[pc];
+    let base: Vec<f64> = y
+        .iter()
+        .zip(&id.residual_before[pc])
+        .map(|(a, e)| a - e)
+        .collect();
+    let ext: Vec<f64> = y
+        .iter()
+        .zip(&id.residual_after[pc])
+        .map(|(a, e)| a - e)
+        .collect();
+    // First: measured, baseline and extended over time on the held-out block where the baseline
+    // misses most (at most 1500 rows around its worst row).
+    if let Some(worst) = rows.iter().copied().max_by(|&a, &b| {
+        id.residual_before[pc][a]
+            .abs()
+            .total_cmp(&id.residual_before[pc][b].abs())
+    }) {
+        let (mut a, mut b) = (worst, worst);
+        // one trial: stop where time goes backwards
+        while a > 0 && id.test[a - 1] && id.time_s[a - 1] < id.time_s[a] && worst - a < 750 {
+            a -= 1;
+        }
+        while b + 1 < y.len()
+            && id.test[b + 1]
+            && id.time_s[b + 1] > id.time_s[b]
+            && b - worst < 750
+        {
+            b += 1;
+        }
+        let t = &id.time_s;
+        let series: Vec<Curve> = vec![
+            (
+                "measured",
+                RGBColor(0, 0, 0),
+                (a..=b).map(|i| (t[i], y[i])).collect(),
+            ),
+            (
+                "baseline",
+                RGBColor(150, 150, 150),
+                (a..=b).map(|i| (t[i], base[i])).collect(),
+            ),
+            (
+                "extended",
+                RGBColor(0, 0, 255),
+                (a..=b).map(|i| (t[i], ext[i])).collect(),
+            ),
+        ];
+        let path = dir.join("timeline.png");
+        draw_lines(
+            &path,
+            &series,
+            "time [s]",
+            &format!("{} [{unit}]", id.outputs[pc]),
+            "held-out window: measured, baseline and extended model",
+        )
+        .map_err(|e| IdentError::Invalid(format!("{}: plot failed: {e}", path.display())))?;
+        out.push(path);
+    }
     for (cause, var, label) in &id.variables {
         let name = if *cause == Cause::None {
             "residual"
@@ -252,8 +340,131 @@ pub fn plots(id: &Identification, dir: &Path) -> Result<Vec<PathBuf>, IdentError
         )
         .map_err(|e| IdentError::Invalid(format!("{}: plot failed: {e}", path.display())))?;
         out.push(path);
+        if matches!(cause, Cause::Hysteresis | Cause::Friction) {
+            // loops: output against the drive (or the moving state), baseline and extended
+            let (lv, ll) = &id.loop_variable;
+            let pts =
+                |p: &[f64]| -> Vec<(f64, f64)> { rows.iter().map(|&i| (lv[i], p[i])).collect() };
+            let series = vec![
+                ("measured", RGBColor(0, 0, 0), pts(y)),
+                ("baseline", RGBColor(150, 150, 150), pts(&base)),
+                ("extended", RGBColor(0, 0, 255), pts(&ext)),
+            ];
+            let path = dir.join(format!("loops_{}.png", cause.name()));
+            draw_points(
+                &path,
+                &series,
+                ll,
+                &format!("{} [{unit}]", id.outputs[pc]),
+                cause.name(),
+            )
+            .map_err(|e| IdentError::Invalid(format!("{}: plot failed: {e}", path.display())))?;
+            out.push(path);
+        }
     }
     Ok(out)
+}
+
+/// A named, coloured set of points.
+type Curve<'a> = (&'a str, RGBColor, Vec<(f64, f64)>);
+type Series<'a> = [Curve<'a>];
+
+fn bounds(series: &Series) -> (f64, f64, f64, f64) {
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for (_, _, pts) in series {
+        for p in pts.iter().filter(|p| p.0.is_finite() && p.1.is_finite()) {
+            x0 = x0.min(p.0);
+            x1 = x1.max(p.0);
+            y0 = y0.min(p.1);
+            y1 = y1.max(p.1);
+        }
+    }
+    if x0.partial_cmp(&x1) != Some(std::cmp::Ordering::Less) {
+        x1 = x0 + 1.0;
+    }
+    if y0.partial_cmp(&y1) != Some(std::cmp::Ordering::Less) {
+        y1 = y0 + 1.0;
+    }
+    (x0, x1, y0, y1)
+}
+
+fn draw_lines(
+    path: &Path,
+    series: &Series,
+    xlabel: &str,
+    ylabel: &str,
+    title: &str,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let (x0, x1, y0, y1) = bounds(series);
+    let root = BitMapBackend::new(path, (1000, 600)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(80)
+        .build_cartesian_2d(x0..x1, y0..y1)?;
+    chart
+        .configure_mesh()
+        .x_desc(xlabel)
+        .y_desc(ylabel)
+        .draw()?;
+    for (name, color, pts) in series {
+        let c = *color;
+        chart
+            .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?
+            .label(*name)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .border_style(BLACK)
+        .background_style(WHITE.mix(0.8))
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+fn draw_points(
+    path: &Path,
+    series: &Series,
+    xlabel: &str,
+    ylabel: &str,
+    title: &str,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let (x0, x1, y0, y1) = bounds(series);
+    let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(format!("held-out loops: {title}"), ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(80)
+        .build_cartesian_2d(x0..x1, y0..y1)?;
+    chart
+        .configure_mesh()
+        .x_desc(xlabel)
+        .y_desc(ylabel)
+        .draw()?;
+    for (name, color, pts) in series {
+        let c = *color;
+        chart
+            .draw_series(pts.iter().map(|p| Circle::new(*p, 1, c.mix(0.6).filled())))?
+            .label(*name)
+            .legend(move |(x, y)| Circle::new((x, y), 4, c.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .border_style(BLACK)
+        .background_style(WHITE.mix(0.8))
+        .draw()?;
+    root.present()?;
+    Ok(())
 }
 
 fn draw(

@@ -11,8 +11,10 @@
 //!
 //! The cause with the best (most negative) `dBIC` among those passing all three is named;
 //! further causes are added greedily while the combined extension passes the same three tests
-//! against the current one and gains at least `min_extra_gain_pct` more on held-out data
-//! (so that the leftovers of an imperfect first extension are not named as a second cause).
+//! against the current one and gains at least `min_extra_gain_pct` more on held-out data, and
+//! does the same against the most flexible variant of the first cause (friction: with
+//! pre-sliding lags and a stroke-dependent level), so that the leftovers of an imperfect first
+//! extension are not named as a second cause.
 //! Finally each named cause is swapped for an unnamed one when that improves the BIC by more
 //! than the margin, or when the swapped set has fewer parameters and a BIC within the margin
 //! (parsimony when one extension's span contains another's: Occam's window). Last, every named
@@ -22,6 +24,7 @@
 use serde::Serialize;
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
+use crate::baseline::SeriesModel;
 use crate::cause::Cause;
 use crate::extension::{Prepared, SetFit, channel_scale};
 
@@ -40,6 +43,8 @@ pub struct Config {
     pub min_extra_gain_pct: f64,
     /// Bandwidth (lags) of the Newey-West variance in the held-out t-test.
     pub hac_lags: usize,
+    /// Baseline of `series` records without `sim_` columns.
+    pub series_model: SeriesModel,
 }
 
 impl Default for Config {
@@ -51,6 +56,7 @@ impl Default for Config {
             max_causes: 3,
             min_extra_gain_pct: 15.0,
             hac_lags: 20,
+            series_model: SeriesModel::Static,
         }
     }
 }
@@ -72,6 +78,9 @@ pub struct Candidate {
     pub rmse: f64,
     /// True when it passed all three tests.
     pub accepted: bool,
+    /// True when its fit was ill-conditioned (cancelling huge terms, or not finite): then it is
+    /// never accepted, whatever its scores.
+    pub ill_conditioned: bool,
 }
 
 /// Pooled held-out RMSE of predictions.
@@ -132,7 +141,9 @@ pub fn score(
     } else {
         1.0
     };
-    let accepted = dbic < -cfg.bic_margin
+    let ill_conditioned = !ext.ill_conditioned.is_empty() || !r1.is_finite();
+    let accepted = !ill_conditioned
+        && dbic < -cfg.bic_margin
         && gain >= cfg.min_gain_pct
         && p_value < cfg.alpha / candidates.max(1) as f64;
     Candidate {
@@ -143,6 +154,7 @@ pub fn score(
         p_value,
         rmse: r1,
         accepted,
+        ill_conditioned,
     }
 }
 
@@ -212,14 +224,12 @@ pub struct Selection {
 /// Runs the candidates and the greedy multi-cause search.
 pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
     let base = prep.fit_set(&[]);
-    let m = Cause::CANDIDATES.len();
-    let singles: Vec<SetFit> = Cause::CANDIDATES
-        .iter()
-        .map(|&c| prep.fit_set(&[c]))
-        .collect();
+    let pool = prep.candidates();
+    let m = pool.len();
+    let singles: Vec<SetFit> = pool.iter().map(|&c| prep.fit_set(&[c])).collect();
     let candidates: Vec<Candidate> = singles
         .iter()
-        .zip(Cause::CANDIDATES)
+        .zip(pool.iter().copied())
         .map(|(f, c)| score(prep, &base, f, cfg, m, c))
         .collect();
     let best = candidates
@@ -237,18 +247,30 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
         };
     };
     let mut current = singles[bi].clone();
-    let mut causes = vec![Cause::CANDIDATES[bi]];
+    let mut causes = vec![pool[bi]];
     let mut steps = Vec::new();
     while causes.len() < cfg.max_causes {
         let mut best_add: Option<(Candidate, SetFit)> = None;
-        for c in Cause::CANDIDATES {
+        // A further cause must pass against the most flexible variant of the first one (so
+        // that what a simpler form of the first leaves over is not named as a second cause);
+        // the named set is then fitted in its ordinary form.
+        prep.flexible.set(Some(causes[0]));
+        let flexible_ref = prep.fit_set(&causes);
+        prep.flexible.set(None);
+        for &c in &pool {
             if causes.contains(&c) {
                 continue;
             }
             let mut set = causes.clone();
             set.push(c);
+            prep.flexible.set(Some(causes[0]));
+            let flex = prep.fit_set(&set);
+            prep.flexible.set(None);
+            let against_flexible = score(prep, &flexible_ref, &flex, cfg, m, c);
             let f = prep.fit_set(&set);
-            let s = score(prep, &current, &f, cfg, m, c);
+            let mut s = score(prep, &current, &f, cfg, m, c);
+            s.accepted &=
+                against_flexible.accepted && against_flexible.gain_pct >= cfg.min_extra_gain_pct;
             steps.push(s.clone());
             if s.accepted
                 && s.gain_pct >= cfg.min_extra_gain_pct
@@ -278,7 +300,7 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
             let cur_bic = bic(&current);
             let cur_k = current.extra_params;
             let mut best_swap: Option<(f64, Vec<Cause>, SetFit)> = None;
-            for c in Cause::CANDIDATES {
+            for &c in &pool {
                 if causes.contains(&c) {
                     continue;
                 }

@@ -13,15 +13,13 @@ use crate::matv5::{self, MatValue};
 /// The data file's name.
 pub const FILE_NAME: &str = "softrobot_train-13_val-4.mat";
 
-/// Where the file is expected: `$OCM_DATA_DIR/soft-arm-measured` or the workspace's sibling
-/// `shared/data/soft-arm-measured`.
-pub fn default_path() -> PathBuf {
-    if let Ok(d) = std::env::var("OCM_DATA_DIR") {
-        return Path::new(&d).join("soft-arm-measured").join(FILE_NAME);
-    }
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data/soft-arm-measured")
-        .join(FILE_NAME)
+/// The file's path inside the data directory.
+pub const DATA_PATH: &str = "soft-arm-measured/softrobot_train-13_val-4.mat";
+
+/// Where the file is expected: in the data directory (`explicit`, else `OCM_DATA_DIR`, else the
+/// nearest `shared/data`, see `ocm_datadir`).
+pub fn default_path(explicit: Option<&Path>) -> Result<PathBuf, IdentError> {
+    ocm_datadir::data_file(explicit, DATA_PATH).map_err(|e| IdentError::Invalid(e.to_string()))
 }
 
 /// A numeric matrix as (rows, cols, column-major data).
@@ -117,6 +115,8 @@ pub fn load(path: &Path) -> Result<Record, IdentError> {
         outputs,
         drives,
         held_out: Some(held),
+        simulated: Vec::new(),
+        states: Vec::new(),
     };
     rec.validate()?;
     Ok(rec)
@@ -128,14 +128,10 @@ mod tests {
 
     #[test]
     fn reads_the_real_soft_arm_file() {
-        let path = default_path();
-        if !path.exists() {
-            eprintln!(
-                "SKIP: {} not found (real soft-arm data absent)",
-                path.display()
-            );
+        let Some(path) = ocm_datadir::test_data(DATA_PATH) else {
+            eprintln!("SKIP: {DATA_PATH} not found (real soft-arm data absent)");
             return;
-        }
+        };
         let rec = load(&path).unwrap();
         assert_eq!(rec.segment_starts.len(), 17, "13 train + 4 val trials");
         assert_eq!(rec.inputs.len(), 3);

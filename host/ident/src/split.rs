@@ -76,6 +76,8 @@ mod tests {
             outputs: vec![Channel::new("y", "-", vec![0.0; n])],
             drives: vec![0],
             held_out: None,
+            simulated: Vec::new(),
+            states: Vec::new(),
         };
         let h = held_out(&rec);
         let count = h.iter().filter(|v| **v).count();

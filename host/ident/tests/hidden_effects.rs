@@ -11,14 +11,14 @@
 //! signal's standard deviation (pooled over x, y, z for `pose`). Records have 2000 rows (100 s
 //! at 20 Hz). Two-effect mixtures run on `axial` and `pose` records.
 
-use ocm_ident::generator::{Spec, generate, hideable};
+use ocm_ident::synth::{Spec, generate, hideable};
 use ocm_ident::{Cause, Config, Kind, identify};
 
 const SEEDS: u64 = 100;
 const ROWS: usize = 2000;
 
 /// Visible effect RMS over noise RMS on the held-out rows, where the gain is scored.
-fn heldout_ratio(g: &ocm_ident::generator::Generated) -> f64 {
+fn heldout_ratio(g: &ocm_ident::synth::Generated) -> f64 {
     let test = ocm_ident::split::held_out(&g.record);
     let v: Vec<f64> = (0..test.len())
         .filter(|&i| test[i])
@@ -116,6 +116,13 @@ fn check_causes(kind: Kind, causes: &[Cause], salt: u64) {
             }
             if !t.strong_low_gain.is_empty() {
                 failures.push(format!("{cause}: {:?}", t.strong_low_gain));
+            }
+            // The gain check above must have had cases to judge.
+            if t.strong == 0 {
+                failures.push(format!(
+                    "{cause}: none of {} records at 3x the noise",
+                    t.runs
+                ));
             }
         }
     }

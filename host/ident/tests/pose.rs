@@ -78,6 +78,8 @@ fn pose_record(seed: u64, stiffness: f64, lag_s: f64) -> Record {
         ],
         drives: vec![0, 1, 2],
         held_out: None,
+        simulated: Vec::new(),
+        states: Vec::new(),
     }
 }
 
@@ -145,7 +147,7 @@ fn lagged_pose_data_names_latency() {
 /// so the residual is negative while the column strains load the tip; a lagged pose peaks later.
 #[test]
 fn pose_diagnostics_cover_every_channel_and_read_the_signature() {
-    use ocm_ident::generator::{Spec, generate};
+    use ocm_ident::synth::{Spec, generate};
     let diag = |cause: Cause, of: Cause| -> Vec<f64> {
         let g = generate(&Spec {
             kind: Kind::Pose,

@@ -1,0 +1,323 @@
+//! The extension features of each cause: columns that enter the joint least-squares fit
+//! beside the baseline's free regressors.
+
+use super::prepared::{Prepared, span};
+use crate::baseline::Baseline;
+use crate::cause::Cause;
+use crate::signal;
+
+/// Play-operator half-widths of the hysteresis extension, as fractions of the drive range.
+pub(super) const PLAY_WIDTHS: [f64; 6] = [0.005, 0.015, 0.035, 0.07, 0.14, 0.28];
+
+/// Extension features of one channel: columns, names and non-negativity flags.
+pub type Features = (Vec<Vec<f64>>, Vec<String>, Vec<bool>);
+
+impl Prepared<'_> {
+    /// Extension features of `cause` for channel `c`: (columns, names, non-negative flags).
+    pub fn features(&self, cause: Cause, c: usize) -> Features {
+        if let Baseline::StateSpace(ss) = &self.baseline
+            && let Some(f) = self.dynamic_features(ss, cause, c)
+        {
+            return f;
+        }
+        let rec = self.rec;
+        let n = rec.len();
+        let ch = &self.channels[c];
+        let mut cols = Vec::new();
+        let mut names = Vec::new();
+        let mut nonneg = Vec::new();
+        match cause {
+            Cause::None | Cause::Latency | Cause::Unexplained => {}
+            Cause::Friction => {
+                let rich = self.flexible.get() == Some(Cause::Friction);
+                // Per velocity source: a smoothed sign (the Coulomb level, +- the same force
+                // in both directions), its magnitude (a direction-independent level while
+                // moving, so that unequal levels per direction are one friction), a viscous
+                // term and a Stribeck peak at breakaway. Each enters with the prediction's
+                // sensitivity to a force at the output (1 for a force output).
+                for (name, v, v0) in self.velocities() {
+                    let vs = 5.0 * v0;
+                    // The direction of motion, held while the part stands still (a stuck seal
+                    // keeps the friction force of its last motion): an elastic-plastic element
+                    // on the position with a pre-sliding displacement of 0.5 % of the stroke.
+                    let sgn: Vec<f64> = match rec.states.iter().find(|s| s.name == name) {
+                        Some(st) => {
+                            let r = 0.005 * span(&st.values);
+                            let p = signal::play(&st.values, &rec.segment_starts, r);
+                            st.values.iter().zip(&p).map(|(x, q)| (x - q) / r).collect()
+                        }
+                        None => v.iter().map(|x| (x / v0).tanh()).collect(),
+                    };
+                    cols.push(sgn.clone());
+                    names.push(format!("Coulomb friction from d{name}/dt"));
+                    cols.push(sgn.iter().map(|s| s.abs()).collect());
+                    names.push(format!("level while moving, d{name}/dt"));
+                    cols.push(v.iter().map(|x| x / vs).collect());
+                    names.push(format!("viscous friction at {vs:.4} /s of {name}"));
+                    cols.push(
+                        (0..n)
+                            .map(|i| sgn[i] * (-(v[i] / vs).powi(2)).exp())
+                            .collect(),
+                    );
+                    names.push(format!("Stribeck peak of d{name}/dt"));
+                    nonneg.extend([false; 4]);
+                    if rich {
+                        // the most flexible variant: pre-sliding (the friction force follows
+                        // the sign through first-order lags, Dahl-like) and a Coulomb level
+                        // that varies along the stroke
+                        for m in [1.0, 3.0, 10.0] {
+                            let lp = signal::lowpass(
+                                &sgn,
+                                &rec.time_s,
+                                &rec.segment_starts,
+                                m * self.dt,
+                            );
+                            cols.push(sgn.iter().zip(&lp).map(|(a, b)| a - b).collect());
+                            names.push(format!("pre-sliding lag {m} samples, d{name}/dt"));
+                        }
+                        if let Some(st) = rec.states.iter().find(|s| s.name == name) {
+                            let (mx, _) = signal::mean_std(&st.values);
+                            let r = 0.5 * span(&st.values);
+                            for p in [1, 2] {
+                                cols.push(
+                                    (0..n)
+                                        .map(|i| sgn[i] * ((st.values[i] - mx) / r).powi(p))
+                                        .collect(),
+                                );
+                                names.push(format!("Coulomb level * ({name} - mean)^{p}"));
+                            }
+                            nonneg.extend([false; 2]);
+                        }
+                        nonneg.extend([false; 3]);
+                        // and a level that follows the inputs (a seal pressed harder at
+                        // higher pressure)
+                        for (k, inp) in rec.inputs.iter().enumerate() {
+                            for p in [1, 2] {
+                                cols.push(
+                                    (0..n)
+                                        .map(|i| {
+                                            sgn[i]
+                                                * ((inp.values[i] - self.means[k]) / self.ranges[k])
+                                                    .powi(p)
+                                        })
+                                        .collect(),
+                                );
+                                names.push(format!("Coulomb level * ({} - mean)^{p}", inp.name));
+                                nonneg.push(false);
+                            }
+                        }
+                    }
+                }
+            }
+            Cause::Hysteresis if self.pose.is_some() => {
+                // Memory in each column: play operators on the model's column strain, mapped to
+                // the tip by the strain sensitivity; the strain lags (dissipates), so weights
+                // are non-negative on the negated sensitivity.
+                for (k, e, sens) in self.column_terms(c) {
+                    let range = span(e);
+                    for &w in &PLAY_WIDTHS {
+                        let p = signal::play(e, &rec.segment_starts, w * range);
+                        cols.push((0..n).map(|i| -sens[i] * (e[i] - p[i])).collect());
+                        names.push(format!("PI weight column {} r={:.4}", k + 1, w * range));
+                        nonneg.push(true);
+                    }
+                }
+            }
+            Cause::Hysteresis => {
+                for &k in &rec.drives {
+                    let u = &rec.inputs[k].values;
+                    for &w in &PLAY_WIDTHS {
+                        let r = w * self.ranges[k];
+                        let p = signal::play(u, &rec.segment_starts, r);
+                        cols.push((0..n).map(|i| ch.sign[k] * (u[i] - p[i])).collect());
+                        names.push(format!("PI weight {} r={:.3}", rec.inputs[k].name, r));
+                        nonneg.push(true);
+                    }
+                }
+            }
+            Cause::RateDependence if self.pose.is_some() => {
+                // Viscosity in each column: Prony terms on the model's column strain.
+                for (k, e, sens) in self.column_terms(c) {
+                    for tau in self.prony_taus() {
+                        let lp = signal::lowpass(e, &rec.time_s, &rec.segment_starts, tau);
+                        cols.push((0..n).map(|i| -sens[i] * (e[i] - lp[i])).collect());
+                        names.push(format!("Prony modulus column {} tau={:.3}s", k + 1, tau));
+                        nonneg.push(true);
+                    }
+                }
+            }
+            Cause::RateDependence => {
+                for &k in &rec.drives {
+                    let u = &rec.inputs[k].values;
+                    for tau in self.prony_taus() {
+                        let lp = signal::lowpass(u, &rec.time_s, &rec.segment_starts, tau);
+                        cols.push((0..n).map(|i| ch.sign[k] * (u[i] - lp[i])).collect());
+                        names.push(format!(
+                            "Prony modulus {} tau={:.3}s",
+                            rec.inputs[k].name, tau
+                        ));
+                        nonneg.push(true);
+                    }
+                }
+            }
+            Cause::Softening => {
+                // Each stiffness-proportional term loses stiffness with the damage histories:
+                // (s_j - d_jm h_m(t)) phi_j, linear in the damage coefficients d_jm.
+                let (path, peak) = self.damage_histories();
+                // Wear saturates (the dissertation's curves converge after conditioning), so the
+                // cycle history enters linearly and through two saturating shapes.
+                let fast: Vec<f64> = path.iter().map(|p| 1.0 - (-p / 0.1).exp()).collect();
+                let slow: Vec<f64> = path.iter().map(|p| 1.0 - (-p / 0.3).exp()).collect();
+                let hist = [
+                    ("cycles", &path),
+                    ("saturating cycles (0.1)", &fast),
+                    ("saturating cycles (0.3)", &slow),
+                    ("peak", &peak),
+                ];
+                // Only stiffness terms the baseline clearly resolves (|coefficient| above three
+                // standard errors) get damage coefficients: damage on an unresolved term is an
+                // unconstrained time-varying stiffness and overfits.
+                let stiff: Vec<usize> = (0..ch.design.regressors.len())
+                    .filter(|&j| ch.design.stiffness[j])
+                    .collect();
+                let resolved: Vec<usize> = stiff
+                    .iter()
+                    .copied()
+                    .filter(|&j| ch.theta[j].abs() > 3.0 * ch.theta_se[j])
+                    .collect();
+                let chosen = if resolved.is_empty() { stiff } else { resolved };
+                let mut terms: Vec<(String, &[f64])> = chosen
+                    .iter()
+                    .map(|&j| {
+                        (
+                            ch.design.names[j].clone(),
+                            ch.design.regressors[j].as_slice(),
+                        )
+                    })
+                    .collect();
+                if let Some(fe) = &ch.design.fixed_elastic {
+                    terms.push(("stiffness".into(), fe.as_slice()));
+                }
+                for (name, phi) in terms {
+                    for (hn, h) in hist {
+                        cols.push((0..n).map(|i| -phi[i] * h[i]).collect());
+                        names.push(format!("damage of {name} per {hn}"));
+                        nonneg.push(false);
+                    }
+                }
+            }
+            Cause::Offset => {
+                // pose z already has its free mounting height: a second constant is redundant
+                let has_constant = self.pose.is_some()
+                    && ch
+                        .design
+                        .regressors
+                        .iter()
+                        .any(|r| r.iter().all(|v| *v == 1.0));
+                if !has_constant {
+                    cols.push(vec![1.0; n]);
+                    names.push(format!("{} bias", rec.outputs[c].name));
+                    nonneg.push(false);
+                }
+                for (k, inp) in rec.inputs.iter().enumerate() {
+                    cols.push(ch.jac[k].clone());
+                    names.push(format!("{} bias", inp.name));
+                    nonneg.push(false);
+                }
+            }
+            Cause::Gain => {
+                if matches!(self.baseline, Baseline::Simulator) {
+                    cols.push(ch.design.fixed.clone());
+                    names.push(format!("{} simulated output gain - 1", rec.outputs[c].name));
+                    nonneg.push(false);
+                }
+                for (k, inp) in rec.inputs.iter().enumerate() {
+                    cols.push((0..n).map(|i| inp.values[i] * ch.jac[k][i]).collect());
+                    names.push(format!("{} gain - 1", inp.name));
+                    nonneg.push(false);
+                }
+            }
+            Cause::Nonlinearity if self.pose.is_some() => {
+                // Static mismatch of the columns' force law: a strain correction that is a
+                // complete cubic in the column's pressure and force, mapped to the tip. The
+                // columns are stacks of the same OCM, so they share the correction.
+                let (pm, pr) = {
+                    let m = (0..3).map(|k| self.means[k]).sum::<f64>() / 3.0;
+                    let r = (0..3).map(|k| self.ranges[k]).fold(0.0, f64::max);
+                    (m, if r > 0.0 { r } else { 1.0 })
+                };
+                let zl: Vec<f64> = rec.inputs[3]
+                    .values
+                    .iter()
+                    .map(|v| (v - self.means[3]) / self.ranges[3])
+                    .collect();
+                let terms = self.column_terms(c);
+                for (a, b) in [
+                    (0, 0),
+                    (1, 0),
+                    (0, 1),
+                    (2, 0),
+                    (1, 1),
+                    (0, 2),
+                    (3, 0),
+                    (2, 1),
+                    (1, 2),
+                    (0, 3),
+                ] {
+                    let mut col = vec![0.0; n];
+                    for &(k, _, sens) in &terms {
+                        let p = &rec.inputs[k].values;
+                        for i in 0..n {
+                            col[i] += sens[i] * ((p[i] - pm) / pr).powi(a) * zl[i].powi(b);
+                        }
+                    }
+                    cols.push(col);
+                    names.push(format!("column strain per pressure^{a}*load^{b}"));
+                    nonneg.push(false);
+                }
+            }
+            Cause::Nonlinearity => {
+                let k_in = rec.inputs.len();
+                let z: Vec<Vec<f64>> = (0..k_in)
+                    .map(|k| {
+                        rec.inputs[k]
+                            .values
+                            .iter()
+                            .map(|v| (v - self.means[k]) / self.ranges[k])
+                            .collect()
+                    })
+                    .collect();
+                // Complete polynomial up to degree 3 (the constant and linear terms keep the
+                // correction centred wherever the mismatch is), less the terms an affine
+                // baseline already has.
+                let affine = matches!(self.baseline, Baseline::Series | Baseline::StateSpace(_));
+                if !affine {
+                    cols.push(vec![1.0; n]);
+                    names.push("constant".into());
+                    nonneg.push(false);
+                }
+                for a in 0..k_in {
+                    if !affine {
+                        cols.push(z[a].clone());
+                        names.push(rec.inputs[a].name.clone());
+                        nonneg.push(false);
+                    }
+                    for b in a..k_in {
+                        cols.push((0..n).map(|i| z[a][i] * z[b][i]).collect());
+                        names.push(format!("{}*{}", rec.inputs[a].name, rec.inputs[b].name));
+                        nonneg.push(false);
+                        for d in b..k_in {
+                            cols.push((0..n).map(|i| z[a][i] * z[b][i] * z[d][i]).collect());
+                            names.push(format!(
+                                "{}*{}*{}",
+                                rec.inputs[a].name, rec.inputs[b].name, rec.inputs[d].name
+                            ));
+                            nonneg.push(false);
+                        }
+                    }
+                }
+            }
+        }
+        (cols, names, nonneg)
+    }
+}

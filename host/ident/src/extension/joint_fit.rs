@@ -1,0 +1,293 @@
+//! Joint fit of the baseline's free coefficients and a set of extensions on the training
+//! rows; latency searches its dead time and lag around the linear fit.
+
+use super::features::Features;
+use super::prepared::{Prepared, channel_scale};
+use crate::cause::Cause;
+use crate::lsq;
+use crate::signal;
+
+/// Dead times of the latency extension's coarse grid, in samples (refined to fractions).
+const DELAYS: [f64; 8] = [0.0, 1.0, 2.0, 3.0, 5.0, 8.0, 13.0, 21.0];
+/// Lag constants of the coarse grid, in sampling intervals (0 = none), refined afterwards.
+const LAGS: [f64; 8] = [0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0];
+
+/// The fit of a set of extensions.
+#[derive(Debug, Clone)]
+pub struct SetFit {
+    /// Causes whose extensions are included.
+    pub causes: Vec<Cause>,
+    /// Prediction per channel on every row.
+    pub pred: Vec<Vec<f64>>,
+    /// Training RSS per channel.
+    pub rss: Vec<f64>,
+    /// Training rows per channel.
+    pub rows: usize,
+    /// Parameters used beyond the baseline's (coefficients plus grid hyper-parameters).
+    pub extra_params: usize,
+    /// Fitted extension parameters: (name, value, standard error).
+    pub params: Vec<(String, f64, f64)>,
+    /// Output channels whose joint fit is ill-conditioned (see [`lsq::LsqFit`]).
+    pub ill_conditioned: Vec<String>,
+}
+
+impl Prepared<'_> {
+    /// Fits the baseline plus the extensions of `causes` jointly on the training rows.
+    pub fn fit_set(&self, causes: &[Cause]) -> SetFit {
+        let rec = self.rec;
+        let n = rec.len();
+        let starts = &rec.segment_starts;
+        let with_latency = causes.contains(&Cause::Latency);
+        // Features do not depend on the latency hyper-parameters: compute them once.
+        let feats: Vec<Features> = (0..self.channels.len())
+            .map(|c| {
+                let mut cols = Vec::new();
+                let mut names = Vec::new();
+                let mut nn = Vec::new();
+                for &cause in causes {
+                    let (a, b, d) = self.features(cause, c);
+                    cols.extend(a);
+                    names.extend(b);
+                    nn.extend(d);
+                }
+                (cols, names, nn)
+            })
+            .collect();
+        // Latency acts on the whole model output: a fractional dead time (linear
+        // interpolation between samples) followed by a first-order lag.
+        let lag = |x: &[f64], d: f64, tau: f64| -> Vec<f64> {
+            let delayed = if d > 0.0 {
+                let whole = d.floor() as usize;
+                let frac = d - d.floor();
+                let a = signal::delay_samples(x, starts, whole);
+                if frac > 0.0 {
+                    let b = signal::delay_samples(x, starts, whole + 1);
+                    a.iter()
+                        .zip(&b)
+                        .map(|(p, q)| (1.0 - frac) * p + frac * q)
+                        .collect()
+                } else {
+                    a
+                }
+            } else {
+                x.to_vec()
+            };
+            if tau > 0.0 {
+                signal::lowpass(&delayed, &rec.time_s, starts, tau)
+            } else {
+                delayed
+            }
+        };
+        let fit_at = |d: f64, tau: f64| {
+            let mut out = Vec::new();
+            for (c, ch) in self.channels.iter().enumerate() {
+                let shift = d > 0.0 || tau > 0.0;
+                let tr = |x: &Vec<f64>| if shift { lag(x, d, tau) } else { x.clone() };
+                let fixed = tr(&ch.design.fixed);
+                let base: Vec<Vec<f64>> = ch.design.regressors.iter().map(tr).collect();
+                let ext: Vec<Vec<f64>> = if shift {
+                    feats[c].0.iter().map(tr).collect()
+                } else {
+                    Vec::new()
+                };
+                let ext_ref: &Vec<Vec<f64>> = if shift { &ext } else { &feats[c].0 };
+                let target: Vec<f64> = ch.y.iter().zip(&fixed).map(|(y, f)| y - f).collect();
+                let mut cols: Vec<&[f64]> = base.iter().map(|r| r.as_slice()).collect();
+                cols.extend(ext_ref.iter().map(|r| r.as_slice()));
+                let mut nn = ch.design.nonneg.clone();
+                nn.extend(&feats[c].2);
+                let fit = lsq::fit(&cols, &target, &self.train, &nn);
+                let mut pred = lsq::predict(&cols, &fit.coef, n);
+                for (p, f) in pred.iter_mut().zip(&fixed) {
+                    *p += f;
+                }
+                out.push((fit, pred, base.len()));
+            }
+            out
+        };
+        let total_rss = |f: &Vec<(lsq::LsqFit, Vec<f64>, usize)>| -> f64 {
+            f.iter()
+                .zip(&self.channels)
+                .map(|((fit, _, _), ch)| fit.rss / channel_scale(ch, &self.train))
+                .sum()
+        };
+        let mut best = (0.0f64, 0.0f64);
+        let mut fits = if with_latency {
+            let max_delay = (n / 20) as f64;
+            let mut best_rss = f64::INFINITY;
+            let mut best_fit = None;
+            let mut consider = |d: f64, m: f64, best: &mut (f64, f64)| -> f64 {
+                if d < 0.0 || m < 0.0 || d > max_delay || (d == 0.0 && m == 0.0) {
+                    return f64::INFINITY;
+                }
+                let f = fit_at(d, m * self.dt);
+                let r = total_rss(&f);
+                if r < best_rss {
+                    best_rss = r;
+                    *best = (d, m);
+                    best_fit = Some(f);
+                }
+                r
+            };
+            // Sets with further causes reuse the single-cause latency estimate.
+            let hint = if causes.len() > 1 {
+                self.latency_hint.get()
+            } else {
+                None
+            };
+            if let Some((d_fix, m_fix)) = hint {
+                // The single-cause estimate is biased by whatever else is in the data: refine
+                // it locally with the other extensions in the fit (lag by golden section on
+                // its log, then the dead time on quarter samples).
+                consider(d_fix, m_fix, &mut best);
+                let g = 0.5 * (5f64.sqrt() - 1.0);
+                let centre = if m_fix > 0.0 {
+                    m_fix.ln()
+                } else {
+                    (0.25f64).ln()
+                };
+                let (mut a, mut b) = (centre - 0.8, centre + 0.8);
+                let mut x1 = b - g * (b - a);
+                let mut x2 = a + g * (b - a);
+                let mut f1 = consider(d_fix, x1.exp(), &mut best);
+                let mut f2 = consider(d_fix, x2.exp(), &mut best);
+                for _ in 0..5 {
+                    if f1 < f2 {
+                        b = x2;
+                        x2 = x1;
+                        f2 = f1;
+                        x1 = b - g * (b - a);
+                        f1 = consider(d_fix, x1.exp(), &mut best);
+                    } else {
+                        a = x1;
+                        x1 = x2;
+                        f1 = f2;
+                        x2 = a + g * (b - a);
+                        f2 = consider(d_fix, x2.exp(), &mut best);
+                    }
+                }
+                let m_best = best.1;
+                for step in [-0.5, -0.25, 0.25, 0.5] {
+                    consider(d_fix + step, m_best, &mut best);
+                }
+            } else {
+                for &d in &DELAYS {
+                    for &m in &LAGS {
+                        consider(d, m, &mut best);
+                    }
+                }
+                // Dead time and lag trade off along a narrow valley: profile the dead time on
+                // quarter samples and golden-search the log lag constant at each.
+                let (d0, m0) = best;
+                let centre = if m0 > 0.0 { m0.ln() } else { (0.25f64).ln() };
+                let g = 0.5 * (5f64.sqrt() - 1.0);
+                let mut d = (d0 - 2.0).max(0.0);
+                while d <= (d0 + 2.0).min(max_delay) {
+                    let (mut a, mut b) = (centre - 2.5, centre + 2.5);
+                    let mut x1 = b - g * (b - a);
+                    let mut x2 = a + g * (b - a);
+                    let mut f1 = consider(d, x1.exp(), &mut best);
+                    let mut f2 = consider(d, x2.exp(), &mut best);
+                    for _ in 0..12 {
+                        if f1 < f2 {
+                            b = x2;
+                            x2 = x1;
+                            f2 = f1;
+                            x1 = b - g * (b - a);
+                            f1 = consider(d, x1.exp(), &mut best);
+                        } else {
+                            a = x1;
+                            x1 = x2;
+                            f1 = f2;
+                            x2 = a + g * (b - a);
+                            f2 = consider(d, x2.exp(), &mut best);
+                        }
+                    }
+                    d += 0.25;
+                }
+                if causes.len() == 1 {
+                    self.latency_hint.set(Some(best));
+                }
+            }
+            best_fit.unwrap_or_else(|| fit_at(0.0, 0.0))
+        } else {
+            fit_at(0.0, 0.0)
+        };
+        // Standard errors of the latency parameters from the curvature of the residual sum of
+        // squares (profile likelihood, Gaussian residuals): se = sqrt(2 s^2 / RSS'').
+        let latency_se = if with_latency {
+            let rows = self.train.iter().filter(|t| **t).count() * self.channels.len();
+            let r0 = total_rss(&fits);
+            let s2 = r0 / (rows.saturating_sub(1).max(1)) as f64;
+            let curv_se = |f: &dyn Fn(f64) -> f64, x: f64, h: f64| -> f64 {
+                let c = (f(x + h) - 2.0 * r0 + f(x - h)) / (h * h);
+                if c > 0.0 {
+                    (2.0 * s2 / c).sqrt()
+                } else {
+                    f64::INFINITY
+                }
+            };
+            let (d, m) = best;
+            let hd = 0.25;
+            let se_d = if d >= hd {
+                curv_se(&|x| total_rss(&fit_at(x, m * self.dt)), d, hd)
+            } else {
+                f64::NAN
+            };
+            let hm = (0.1 * m).max(0.05);
+            let se_m = if m >= hm {
+                curv_se(&|x| total_rss(&fit_at(d, x * self.dt)), m, hm)
+            } else {
+                f64::NAN
+            };
+            (se_d * self.dt, se_m * self.dt)
+        } else {
+            (0.0, 0.0)
+        };
+        let best = (best.0, best.1 * self.dt);
+        let mut params = Vec::new();
+        let mut extra = 0usize;
+        let base_params: usize = self.channels.iter().map(|c| c.theta.len()).sum();
+        let mut used = 0usize;
+        let mut pred = Vec::new();
+        let mut rss = Vec::new();
+        let mut rows = 0;
+        let mut ill_conditioned = Vec::new();
+        for (c, (fit, p, nb)) in fits.drain(..).enumerate() {
+            used += fit.dof_used;
+            if fit.ill_conditioned || p.iter().any(|v| !v.is_finite()) {
+                ill_conditioned.push(rec.outputs[c].name.clone());
+            }
+            for (j, name) in feats[c].1.iter().enumerate() {
+                let v = fit.coef[nb + j];
+                if v != 0.0 {
+                    let label = if self.channels.len() > 1 {
+                        format!("{} [{}]", name, rec.outputs[c].name)
+                    } else {
+                        name.clone()
+                    };
+                    params.push((label, v, fit.std_err[nb + j]));
+                }
+            }
+            rows = fit.rows;
+            rss.push(fit.rss);
+            pred.push(p);
+        }
+        extra += used.saturating_sub(base_params);
+        if with_latency {
+            extra += 2;
+            // NaN marks a parameter at its lower bound (no two-sided curvature).
+            params.push(("dead time [s]".into(), best.0 * self.dt, latency_se.0));
+            params.push(("lag time constant [s]".into(), best.1, latency_se.1));
+        }
+        SetFit {
+            causes: causes.to_vec(),
+            pred,
+            rss,
+            rows,
+            extra_params: extra,
+            params,
+            ill_conditioned,
+        }
+    }
+}

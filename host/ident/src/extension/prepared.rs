@@ -1,0 +1,282 @@
+//! A record prepared for identification: the baseline fitted per output channel, its input
+//! sensitivities, and the history variables the extensions are built from.
+
+use crate::baseline::{Baseline, Design, PoseStates};
+use crate::cause::Cause;
+use crate::data::Record;
+use crate::lsq;
+use crate::signal;
+
+/// Number of Prony time constants (log-spaced between 2 samples and a tenth of the record).
+const PRONY_TERMS: usize = 7;
+
+/// One output channel, prepared with its baseline fit.
+#[derive(Debug, Clone)]
+pub struct ChannelFit {
+    /// Measured output.
+    pub y: Vec<f64>,
+    /// Baseline design on the measured inputs.
+    pub design: Design,
+    /// Baseline coefficients fitted on the training rows.
+    pub theta: Vec<f64>,
+    /// Standard errors of `theta`.
+    pub theta_se: Vec<f64>,
+    /// Baseline prediction.
+    pub yhat: Vec<f64>,
+    /// Sensitivity of the prediction to a relative stiffness change.
+    pub elastic: Vec<f64>,
+    /// `d yhat / d u_k` per input.
+    pub jac: Vec<Vec<f64>>,
+    /// Sign of the mean sensitivity to each input (+1 when flat).
+    pub sign: Vec<f64>,
+    /// True when the baseline's own fit is ill-conditioned (see [`lsq::LsqFit`]).
+    pub ill_conditioned: bool,
+}
+
+/// A record prepared for identification: split, baseline fitted, sensitivities known.
+#[derive(Debug, Clone)]
+pub struct Prepared<'a> {
+    /// The record.
+    pub rec: &'a Record,
+    /// The baseline.
+    pub baseline: Baseline,
+    /// Training rows.
+    pub train: Vec<bool>,
+    /// Held-out rows.
+    pub test: Vec<bool>,
+    /// Median sampling interval, seconds.
+    pub dt: f64,
+    /// Per-output fits.
+    pub channels: Vec<ChannelFit>,
+    /// Input ranges on the training rows.
+    pub ranges: Vec<f64>,
+    /// Input means on the training rows.
+    pub means: Vec<f64>,
+    /// Latency (dead time in samples, lag in samples) found by the single-cause fit.
+    pub latency_hint: std::cell::Cell<Option<(f64, f64)>>,
+    /// Column strains and tip sensitivities of the pose baseline (`None` for other kinds).
+    pub pose: Option<PoseStates>,
+    /// The cause whose most flexible variant is fitted (while a further cause is tested
+    /// against it), if any.
+    pub flexible: std::cell::Cell<Option<Cause>>,
+}
+
+impl<'a> Prepared<'a> {
+    /// Splits the record, fits the baseline and computes sensitivities.
+    pub fn new(rec: &'a Record, baseline: Baseline, test: Vec<bool>) -> Prepared<'a> {
+        let train: Vec<bool> = test.iter().map(|t| !t).collect();
+        let n = rec.len();
+        let cols: Vec<&[f64]> = rec.inputs.iter().map(|c| c.values.as_slice()).collect();
+        let mut ranges = Vec::new();
+        let mut means = Vec::new();
+        for c in &rec.inputs {
+            let tr: Vec<f64> = (0..n).filter(|&i| train[i]).map(|i| c.values[i]).collect();
+            let lo = tr.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = tr.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let r = hi - lo;
+            ranges.push(if r > 0.0 && r.is_finite() { r } else { 1.0 });
+            means.push(signal::mean_std(&tr).0);
+        }
+        let mut channels = Vec::new();
+        for (c, out) in rec.outputs.iter().enumerate() {
+            let design =
+                baseline.design(&cols, &rec.time_s, &rec.segment_starts, c, &rec.simulated);
+            let target: Vec<f64> = out
+                .values
+                .iter()
+                .zip(&design.fixed)
+                .map(|(y, f)| y - f)
+                .collect();
+            let regs: Vec<&[f64]> = design.regressors.iter().map(|r| r.as_slice()).collect();
+            let fit = lsq::fit(&regs, &target, &train, &design.nonneg);
+            let mut yhat = lsq::predict(&regs, &fit.coef, n);
+            for (p, f) in yhat.iter_mut().zip(&design.fixed) {
+                *p += f;
+            }
+            let mut elastic = vec![0.0; n];
+            for (j, r) in design.regressors.iter().enumerate() {
+                if design.stiffness[j] {
+                    for i in 0..n {
+                        elastic[i] += fit.coef[j] * r[i];
+                    }
+                }
+            }
+            if let Some(fe) = &design.fixed_elastic {
+                for i in 0..n {
+                    elastic[i] += fe[i];
+                }
+            }
+            // Central differences of the fitted baseline in each input.
+            let mut jac = Vec::new();
+            let mut sign = Vec::new();
+            for k in 0..rec.inputs.len() {
+                let h = 1e-4 * ranges[k];
+                let eval = |delta: f64| -> Vec<f64> {
+                    let shifted: Vec<f64> =
+                        rec.inputs[k].values.iter().map(|v| v + delta).collect();
+                    let mut cc = cols.clone();
+                    cc[k] = &shifted;
+                    let d =
+                        baseline.design(&cc, &rec.time_s, &rec.segment_starts, c, &rec.simulated);
+                    let r: Vec<&[f64]> = d.regressors.iter().map(|r| r.as_slice()).collect();
+                    let mut p = lsq::predict(&r, &fit.coef, n);
+                    for (a, f) in p.iter_mut().zip(&d.fixed) {
+                        *a += f;
+                    }
+                    p
+                };
+                let up = eval(h);
+                let dn = eval(-h);
+                let j: Vec<f64> = up
+                    .iter()
+                    .zip(&dn)
+                    .map(|(a, b)| (a - b) / (2.0 * h))
+                    .collect();
+                let m: f64 = (0..n).filter(|&i| train[i]).map(|i| j[i]).sum();
+                sign.push(if m < 0.0 { -1.0 } else { 1.0 });
+                jac.push(j);
+            }
+            channels.push(ChannelFit {
+                y: out.values.clone(),
+                design,
+                theta: fit.coef,
+                theta_se: fit.std_err,
+                yhat,
+                elastic,
+                jac,
+                sign,
+                ill_conditioned: fit.ill_conditioned,
+            });
+        }
+        let pose = baseline.pose_states(&cols);
+        Prepared {
+            rec,
+            pose,
+            baseline,
+            train,
+            test,
+            dt: signal::median_dt(&rec.time_s),
+            channels,
+            ranges,
+            means,
+            latency_hint: std::cell::Cell::new(None),
+            flexible: std::cell::Cell::new(None),
+        }
+    }
+
+    /// The candidate causes for this record: the fixed seven, and friction where the record
+    /// has a position whose velocity the friction force follows (the simulator's states).
+    pub fn candidates(&self) -> Vec<Cause> {
+        let mut c = Cause::CANDIDATES.to_vec();
+        let dynamic = matches!(&self.baseline, Baseline::StateSpace(ss) if ss.order() > 0);
+        if dynamic || !self.velocities().is_empty() {
+            c.push(Cause::Friction);
+        }
+        c
+    }
+
+    /// Velocity sources of the friction extension: (name, velocity, smoothing scale `v0` of its
+    /// sign). The velocity is a central difference over +-2 samples (quantised positions); `v0`
+    /// is 5 % of the 95th percentile of `|v|` on the training rows, so the sign switches within
+    /// a few percent of the typical speed.
+    pub fn velocities(&self) -> Vec<(String, Vec<f64>, f64)> {
+        let rec = self.rec;
+        rec.states
+            .iter()
+            .filter_map(|s| {
+                let v = signal::central_rate(&s.values, &rec.time_s, &rec.segment_starts, 2);
+                let mut a: Vec<f64> = (0..v.len())
+                    .filter(|&i| self.train[i])
+                    .map(|i| v[i].abs())
+                    .collect();
+                if a.is_empty() {
+                    return None;
+                }
+                let k = (a.len() * 95 / 100).min(a.len() - 1);
+                let (_, p95, _) = a.select_nth_unstable_by(k, |x, y| x.total_cmp(y));
+                let v0 = 0.05 * *p95;
+                (v0 > 0.0 && v0.is_finite()).then(|| (s.name.clone(), v, v0))
+            })
+            .collect()
+    }
+
+    /// Prony time constants used by the rate-dependence extension, seconds.
+    pub fn prony_taus(&self) -> Vec<f64> {
+        let span = self.segment_span();
+        let lo = 2.0 * self.dt;
+        let hi = (span / 10.0).max(4.0 * lo);
+        (0..PRONY_TERMS)
+            .map(|i| lo * (hi / lo).powf(i as f64 / (PRONY_TERMS - 1) as f64))
+            .collect()
+    }
+
+    fn segment_span(&self) -> f64 {
+        let n = self.rec.len();
+        signal::segments(&self.rec.segment_starts, n)
+            .iter()
+            .map(|&(s, e)| self.rec.time_s[e - 1] - self.rec.time_s[s])
+            .fold(0.0, f64::max)
+            .max(self.dt * 10.0)
+    }
+
+    /// Cycle-count and peak-deformation history variables of the damage extension, in [0, 1].
+    pub fn damage_histories(&self) -> (Vec<f64>, Vec<f64>) {
+        let n = self.rec.len();
+        let mut path = vec![0.0; n];
+        let mut peak = vec![0.0; n];
+        for &k in &self.rec.drives {
+            let u = &self.rec.inputs[k].values;
+            let p = signal::path_length(u);
+            let m = signal::running_peak(u, u[0]);
+            for i in 0..n {
+                path[i] += p[i] / self.ranges[k];
+                peak[i] += m[i] / self.ranges[k];
+            }
+        }
+        let norm = |v: &mut Vec<f64>| {
+            let mx = v.iter().copied().fold(0.0, f64::max);
+            if mx > 0.0 {
+                v.iter_mut().for_each(|x| *x /= mx);
+            }
+        };
+        norm(&mut path);
+        norm(&mut peak);
+        (path, peak)
+    }
+
+    /// Per column of the pose baseline: (column, its strain, channel `c`'s sensitivity to it).
+    pub(super) fn column_terms(&self, c: usize) -> Vec<(usize, &[f64], &[f64])> {
+        match &self.pose {
+            Some(ps) => (0..ps.strains.len())
+                .map(|k| (k, ps.strains[k].as_slice(), ps.sens[c][k].as_slice()))
+                .collect(),
+            None => Vec::new(),
+        }
+    }
+}
+
+/// Range of a series (1 when flat or empty).
+pub(super) fn span(x: &[f64]) -> f64 {
+    let lo = x.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = x.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let r = hi - lo;
+    if r > 0.0 && r.is_finite() { r } else { 1.0 }
+}
+
+/// Training mean square of a channel's baseline residual, used to weigh channels.
+pub fn channel_scale(ch: &ChannelFit, train: &[bool]) -> f64 {
+    let mut s = 0.0;
+    let mut k = 0usize;
+    for i in 0..ch.y.len() {
+        if train[i] {
+            let e = ch.y[i] - ch.yhat[i];
+            s += e * e;
+            k += 1;
+        }
+    }
+    if k == 0 || s <= 0.0 {
+        1.0
+    } else {
+        s / k as f64
+    }
+}

@@ -1,0 +1,85 @@
+//! Hidden effects inside the dynamics of oscillators, identified on the linear state-space
+//! baseline (free-run predictions). `OCM_DYN_SEEDS` sets the seeds per case (default 3).
+
+use ocm_ident::baseline::SeriesModel;
+use ocm_ident::dynamic_generator::{DynSpec, EFFECTS, System, generate};
+use ocm_ident::{Cause, Config, identify};
+
+#[test]
+fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
+    let seeds: u64 = std::env::var("OCM_DYN_SEEDS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(3);
+    let cfg = Config {
+        series_model: SeriesModel::StateSpace,
+        ..Config::default()
+    };
+    let mut correct = 0;
+    let mut total = 0;
+    let mut false_alarms = 0;
+    for system in [System::Oscillator1, System::Oscillator2] {
+        for effect in std::iter::once(Cause::None).chain(EFFECTS) {
+            for seed in 0..seeds {
+                let g = generate(&DynSpec {
+                    system,
+                    effect,
+                    seed: 1000 + seed,
+                    rows: 2000,
+                });
+                let id = identify(&g.record, &cfg).unwrap();
+                let r = &id.report;
+                let ok = r.causes == [effect];
+                eprintln!(
+                    "{system:?} {effect} seed {seed}: named {:?} ({}), ratio {:.1}, gain {:.1} %, {}",
+                    r.causes,
+                    if ok { "ok" } else { "MISS" },
+                    g.ratio,
+                    r.gain_pct,
+                    g.details
+                );
+                if effect == Cause::None {
+                    false_alarms += usize::from(!ok);
+                } else {
+                    total += 1;
+                    correct += usize::from(ok);
+                }
+            }
+        }
+    }
+    eprintln!("dynamic battery: {correct} / {total} correct, {false_alarms} false alarms");
+    // regression bounds of the measured figures (3 seeds: 11 of 18 correct, 1 false alarm of
+    // 6 clean records); the goals (95 %, none) are not reached, see the README
+    assert!(total > 0);
+    assert!(
+        false_alarms * 6 <= seeds as usize * 2,
+        "{false_alarms} false alarms"
+    );
+    assert!(correct * 100 >= 55 * total, "{correct} / {total}");
+}
+
+/// The speed figure of a 100k-row dynamic record (no assertion on time: run it with
+/// `--ignored --nocapture` and read the figure; the identification itself must still work).
+#[test]
+#[ignore]
+fn dynamic_100k_record_figure() {
+    let g = generate(&DynSpec {
+        system: System::Oscillator1,
+        effect: Cause::Friction,
+        seed: 7,
+        rows: 100_000,
+    });
+    let cfg = Config {
+        series_model: SeriesModel::StateSpace,
+        ..Config::default()
+    };
+    let t0 = std::time::Instant::now();
+    let id = identify(&g.record, &cfg).unwrap();
+    eprintln!(
+        "100k-row dynamic record: {:.1} s, named {:?}, gain {:.1} %",
+        t0.elapsed().as_secs_f64(),
+        id.report.causes,
+        id.report.gain_pct
+    );
+    assert!(id.report.causes.contains(&Cause::Friction));
+}
