@@ -1,0 +1,78 @@
+//! Trajectories from the reduced-FEM data sets written by `ocm mor` (NPY + JSON manifest).
+
+use std::path::Path;
+
+use ocm_mor::dataset::{Dataset, Manifest, read};
+
+use crate::error::{DynamicsError, Result};
+use crate::trajectory::{FORCE_DIM, PRESSURE_DIM, Trajectory};
+
+/// Reads the data set in `dir` and cuts it into its sequences.
+pub fn read_trajectories(dir: &Path) -> Result<(Manifest, Vec<Trajectory>)> {
+    let ds = read(dir, None)?;
+    let trajs = split_sequences(&ds)?;
+    Ok((ds.manifest, trajs))
+}
+
+/// The data set's rows grouped by sequence index, in order.
+pub fn split_sequences(ds: &Dataset) -> Result<Vec<Trajectory>> {
+    let cols: Vec<usize> = ds.manifest.arrays.iter().map(|a| a.columns.len()).collect();
+    let find = |file: &str| {
+        ds.manifest
+            .arrays
+            .iter()
+            .position(|a| a.file == file)
+            .ok_or_else(|| DynamicsError::Data(format!("data set has no {file}")))
+    };
+    let (iseq, ip, iforce, ix, iv) = (
+        find("sequence.npy")?,
+        find("pressure_kpa.npy")?,
+        find("tip_force_n.npy")?,
+        find("xs.npy")?,
+        find("xs_dot.npy")?,
+    );
+    if cols[ip] != PRESSURE_DIM || cols[iforce] != FORCE_DIM || cols[ix] != cols[iv] {
+        return Err(DynamicsError::Data(format!(
+            "unexpected column counts: pressure {}, force {}, X_S {}, dX_S/dt {}",
+            cols[ip], cols[iforce], cols[ix], cols[iv]
+        )));
+    }
+    let n = cols[ix];
+    let rows = ds.manifest.samples;
+    let seq = &ds.arrays[iseq];
+    let mut out: Vec<Trajectory> = Vec::new();
+    let mut current = f64::NAN;
+    for r in 0..rows {
+        let (s, step) = (seq[2 * r], seq[2 * r + 1]);
+        if s != current {
+            if step != 0.0 {
+                return Err(DynamicsError::Data(format!(
+                    "row {r}: sequence {s} starts at step {step}, not 0"
+                )));
+            }
+            current = s;
+            out.push(Trajectory {
+                dt_s: ds.manifest.dt_s,
+                state_dim: n,
+                pressure_kpa: Vec::new(),
+                force_n: Vec::new(),
+                state: Vec::new(),
+                velocity: Vec::new(),
+            });
+        }
+        let t = out.last_mut().expect("a sequence was started");
+        t.pressure_kpa
+            .extend_from_slice(&ds.arrays[ip][r * PRESSURE_DIM..(r + 1) * PRESSURE_DIM]);
+        t.force_n
+            .extend_from_slice(&ds.arrays[iforce][r * FORCE_DIM..(r + 1) * FORCE_DIM]);
+        t.state
+            .extend_from_slice(&ds.arrays[ix][r * n..(r + 1) * n]);
+        t.velocity
+            .extend_from_slice(&ds.arrays[iv][r * n..(r + 1) * n]);
+    }
+    for (i, t) in out.iter().enumerate() {
+        t.validate()
+            .map_err(|e| DynamicsError::Data(format!("sequence {i}: {e}")))?;
+    }
+    Ok(out)
+}

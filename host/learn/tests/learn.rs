@@ -1,0 +1,457 @@
+//! Behaviour of the training loop, the networks and the checkpoints on small real problems.
+
+use ocm_learn::burn::module::Module;
+use ocm_learn::burn::tensor::{Device, Tensor, TensorData};
+use ocm_learn::checkpoint::param_shapes;
+use ocm_learn::{
+    Checkpoint, CheckpointInfo, LearnError, Mlp, MlpConfig, SequenceEncoderConfig, Split,
+    Standardizer, TrainConfig, cpu, cpu_autodiff, gather_rows, save_checkpoint, train, values,
+};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::collections::BTreeMap;
+
+/// 512 samples of `y = sin(2 x0) + x0 x1`, inputs uniform in [-1.5, 1.5]^2, scaled.
+fn regression(seed: u64) -> (Vec<f32>, Vec<f32>) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut x = Vec::new();
+    let mut y = Vec::new();
+    for _ in 0..512 {
+        let a: f64 = rng.random_range(-1.5..1.5);
+        let b: f64 = rng.random_range(-1.5..1.5);
+        x.extend([a, b]);
+        y.push((2.0 * a).sin() + a * b);
+    }
+    let sx = Standardizer::fit(&x, 2).unwrap();
+    let sy = Standardizer::fit(&y, 1).unwrap();
+    (sx.apply(&x).unwrap(), sy.apply(&y).unwrap())
+}
+
+fn mse(model: &Mlp, x: &[f32], y: &[f32], batch: &[usize], device: &Device) -> Tensor<1> {
+    let xb = gather_rows(x, 2, batch, device);
+    let yb = gather_rows(y, 1, batch, device);
+    (model.forward(xb) - yb).powi_scalar(2).mean()
+}
+
+fn fit(x: &[f32], y: &[f32], cfg: &TrainConfig, seed: u64) -> (f64, ocm_learn::TrainReport<Mlp>) {
+    let model = MlpConfig::relu(2, &[32, 32], 1).init(&cpu_autodiff(), seed);
+    let split = Split::random(y.len(), cfg.val_fraction, cfg.seed);
+    let before = ocm_learn::train::evaluate(&model.valid(), &split.val, 512, &cpu(), &|m, b, d| {
+        mse(m, x, y, b, d)
+    });
+    let report = train(model, y.len(), cfg, |m, b, d| mse(m, x, y, b, d)).unwrap();
+    (before, report)
+}
+
+fn small_cfg(epochs: usize) -> TrainConfig {
+    TrainConfig {
+        epochs,
+        batch_size: 32,
+        learning_rate: 3e-3,
+        val_fraction: 0.25,
+        patience: 0,
+        grad_clip_norm: None,
+        seed: 11,
+        progress: false,
+    }
+}
+
+#[test]
+fn training_cuts_the_loss_and_cannot_fit_shuffled_targets() {
+    let (x, y) = regression(1);
+    let (before, report) = fit(&x, &y, &small_cfg(60), 5);
+    let ratio = report.best_loss / before;
+    // A smooth 2-D function: the validation loss must fall at least 20-fold.
+    assert!(
+        ratio < 0.05,
+        "validation loss {before:.3} -> {:.4} (ratio {ratio:.3})",
+        report.best_loss
+    );
+
+    // The same inputs with the targets permuted carry no signal: the held-out loss cannot fall
+    // much below the targets' variance (1 in scaled units).
+    let mut shuffled = y.clone();
+    let mut rng = ChaCha8Rng::seed_from_u64(99);
+    rand::seq::SliceRandom::shuffle(shuffled.as_mut_slice(), &mut rng);
+    let (before_s, report_s) = fit(&x, &shuffled, &small_cfg(60), 5);
+    let ratio_s = report_s.best_loss / before_s;
+    assert!(
+        report_s.best_loss > 0.7 && ratio_s > 0.5,
+        "shuffled targets: validation loss {before_s:.3} -> {:.3}",
+        report_s.best_loss
+    );
+}
+
+#[test]
+fn early_stopping_keeps_the_best_epoch() {
+    let (x, y) = regression(2);
+    let mut shuffled = y.clone();
+    rand::seq::SliceRandom::shuffle(shuffled.as_mut_slice(), &mut ChaCha8Rng::seed_from_u64(3));
+    let cfg = TrainConfig {
+        patience: 4,
+        learning_rate: 1e-2,
+        ..small_cfg(300)
+    };
+    let (_, report) = fit(&x, &shuffled, &cfg, 8);
+    assert!(
+        report.stopped_early,
+        "overfitting noise must trigger early stopping"
+    );
+    let last = report.curve.last().unwrap().epoch;
+    assert_eq!(
+        last,
+        report.best_epoch + 4,
+        "stops `patience` epochs after the best"
+    );
+    let best = report
+        .curve
+        .iter()
+        .map(|r| r.val_loss)
+        .fold(f64::INFINITY, f64::min);
+    assert_eq!(best, report.best_loss);
+    // The returned model is the best epoch's: its validation loss is the recorded minimum.
+    let split = Split::random(y.len(), cfg.val_fraction, cfg.seed);
+    let again = ocm_learn::train::evaluate(&report.model, &split.val, 32, &cpu(), &|m, b, d| {
+        mse(m, &x, &shuffled, b, d)
+    });
+    assert!(
+        (again - best).abs() < 1e-6 * best.max(1.0),
+        "{again} vs {best}"
+    );
+}
+
+fn weights(m: &Mlp) -> Vec<f32> {
+    m.layers
+        .iter()
+        .flat_map(|l| {
+            let mut w = values(l.weight.val());
+            w.extend(values(l.bias.as_ref().unwrap().val()));
+            w
+        })
+        .collect()
+}
+
+#[test]
+fn same_seed_same_weights() {
+    let (x, y) = regression(4);
+    let cfg = small_cfg(3);
+    let (_, a) = fit(&x, &y, &cfg, 21);
+    let (_, b) = fit(&x, &y, &cfg, 21);
+    assert_eq!(weights(&a.model), weights(&b.model));
+    assert_eq!(
+        a.curve.iter().map(|r| r.train_loss).collect::<Vec<_>>(),
+        b.curve.iter().map(|r| r.train_loss).collect::<Vec<_>>()
+    );
+    let (_, c) = fit(&x, &y, &cfg, 22);
+    assert_ne!(weights(&a.model), weights(&c.model));
+    let other_order = TrainConfig { seed: 12, ..cfg };
+    let (_, d) = fit(&x, &y, &other_order, 21);
+    assert_ne!(weights(&a.model), weights(&d.model));
+    // Initialisation alone is seeded too, for every network.
+    let enc = SequenceEncoderConfig {
+        input: 5,
+        d_model: 16,
+        n_heads: 4,
+        d_ff: 32,
+        n_layers: 2,
+        max_len: 6,
+    };
+    let e1 = enc.init(&cpu(), 3);
+    let e2 = enc.init(&cpu(), 3);
+    let probe = Tensor::<3>::from_data(
+        TensorData::new(
+            (0..60).map(|i| (i as f32 * 0.37).sin()).collect::<Vec<_>>(),
+            [2, 6, 5],
+        ),
+        &cpu(),
+    );
+    assert_eq!(
+        values(e1.forward(probe.clone())),
+        values(e2.forward(probe.clone()))
+    );
+    assert_ne!(
+        values(e1.forward(probe.clone())),
+        values(enc.init(&cpu(), 4).forward(probe))
+    );
+}
+
+#[test]
+fn split_is_seeded_disjoint_and_complete() {
+    let s = Split::random(103, 0.2, 7);
+    assert_eq!(s.val.len(), 21);
+    let mut all: Vec<usize> = s.train.iter().chain(&s.val).copied().collect();
+    all.sort_unstable();
+    assert_eq!(all, (0..103).collect::<Vec<_>>());
+    assert_eq!(s, Split::random(103, 0.2, 7));
+    assert_ne!(s, Split::random(103, 0.2, 8));
+}
+
+fn info<'a>(cfg: &'a MlpConfig) -> CheckpointInfo<'a, MlpConfig> {
+    CheckpointInfo {
+        architecture: "test/mlp",
+        config: cfg,
+        scalers: BTreeMap::from([(
+            "input".to_string(),
+            Standardizer {
+                mean: vec![1.0, -2.0],
+                std: vec![0.5, 3.0],
+            },
+        )]),
+        meta: serde_json::json!({"epochs": 3}),
+    }
+}
+
+fn probe_output(m: &Mlp) -> Vec<f32> {
+    let x = Tensor::<2>::from_data(
+        TensorData::new(vec![0.3f32, -1.2, 2.0, 0.1, -0.5, 0.7], [3, 2]),
+        &cpu(),
+    );
+    values(m.forward(x))
+}
+
+#[test]
+fn checkpoint_round_trip_restores_outputs_and_scalers() {
+    let dir = std::env::temp_dir().join(format!("ocm-learn-ck-{}", std::process::id()));
+    let path = dir.join("mlp.ckpt");
+    let cfg = MlpConfig::relu(2, &[16, 8], 1);
+    let (x, y) = regression(6);
+    let model = cfg.init(&cpu_autodiff(), 1);
+    let trained = train(model, y.len(), &small_cfg(2), |m, b, d| {
+        mse(m, &x, &y, b, d)
+    })
+    .unwrap()
+    .model;
+    save_checkpoint(&path, &trained, &info(&cfg)).unwrap();
+    let ck = Checkpoint::read(&path).unwrap();
+    let stored: MlpConfig = ck.config().unwrap();
+    assert_eq!(stored, cfg);
+    // A model built from another seed takes the stored weights exactly.
+    let loaded = ck
+        .load_into(stored.init(&cpu(), 999), "test/mlp", &cfg)
+        .unwrap();
+    assert_eq!(probe_output(&loaded), probe_output(&trained));
+    assert_ne!(probe_output(&cfg.init(&cpu(), 999)), probe_output(&trained));
+    assert_eq!(ck.scaler("input").unwrap().std, vec![0.5, 3.0]);
+    assert_eq!(ck.header.meta["epochs"], 3);
+    assert_eq!(ck.header.params, param_shapes(&trained));
+    assert!(ck.scaler("output").is_err());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn corrupt_or_mismatched_checkpoints_are_refused() {
+    let dir = std::env::temp_dir().join(format!("ocm-learn-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("mlp.ckpt");
+    let cfg = MlpConfig::relu(2, &[16, 8], 1);
+    let model = cfg.init(&cpu(), 1);
+    save_checkpoint(&path, &model, &info(&cfg)).unwrap();
+    let good = std::fs::read(&path).unwrap();
+    let corrupt = |bytes: &[u8], name: &str| {
+        let p = dir.join(name);
+        std::fs::write(&p, bytes).unwrap();
+        match Checkpoint::read(&p) {
+            Err(LearnError::CorruptCheckpoint { path, reason }) => {
+                assert_eq!(path, p);
+                reason
+            }
+            other => panic!("{name}: expected a corrupt-checkpoint error, got {other:?}"),
+        }
+    };
+    let mut flipped = good.clone();
+    let last = flipped.len() - 5;
+    flipped[last] ^= 0x40;
+    assert!(corrupt(&flipped, "payload.ckpt").contains("weights checksum"));
+    let mut header = good.clone();
+    header[40] ^= 0x01;
+    assert!(corrupt(&header, "header.ckpt").contains("header checksum"));
+    assert!(corrupt(&good[..good.len() - 100], "short.ckpt").contains("bytes"));
+    assert!(corrupt(b"P6 not a checkpoint at all, just some text", "text.ckpt").contains("magic"));
+    assert!(corrupt(&good[..20], "stub.ckpt").contains("shorter"));
+
+    let ck = Checkpoint::read(&path).unwrap();
+    let mismatch = |r: ocm_learn::Result<Mlp>| match r {
+        Err(LearnError::CheckpointMismatch { reason, .. }) => reason,
+        other => panic!("expected a mismatch, got {other:?}"),
+    };
+    let wider = MlpConfig::relu(2, &[32, 8], 1);
+    assert!(
+        mismatch(ck.load_into(wider.init(&cpu(), 1), "test/mlp", &wider)).contains("configuration")
+    );
+    assert!(
+        mismatch(ck.load_into(cfg.init(&cpu(), 1), "test/transformer", &cfg)).contains("test/mlp")
+    );
+    // Same configuration claimed, different network: the shape check catches it.
+    assert!(mismatch(ck.load_into(wider.init(&cpu(), 1), "test/mlp", &cfg)).contains("shapes"));
+    let missing = Checkpoint::read(&dir.join("absent.ckpt"));
+    assert!(matches!(missing, Err(LearnError::Io { .. })));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Central differences of the scalar loss against autodiff for a few weights of each kind.
+fn check_gradients<M: Module>(
+    model: M,
+    loss: impl Fn(&M) -> Tensor<1>,
+    params: impl Fn(&M) -> Vec<Tensor<2>>,
+    rebuild: impl Fn(&M, usize, usize, f32) -> M,
+) {
+    let l = loss(&model);
+    let grads = l.backward();
+    let ps = params(&model);
+    let mut checked = 0;
+    for (pi, p) in ps.iter().enumerate() {
+        let g = values(p.grad(&grads).expect("parameter has a gradient"));
+        let n = g.len();
+        for k in [0, n / 3, n / 2, n - 1] {
+            let h = 1e-2f32;
+            let up = values(loss(&rebuild(&model, pi, k, h)).inner())[0] as f64;
+            let down = values(loss(&rebuild(&model, pi, k, -h)).inner())[0] as f64;
+            let fd = (up - down) / (2.0 * f64::from(h));
+            let ad = f64::from(g[k]);
+            let tol = 2e-3 + 2e-2 * ad.abs().max(fd.abs());
+            assert!(
+                (fd - ad).abs() < tol,
+                "param {pi} entry {k}: autodiff {ad:.6} vs finite difference {fd:.6}"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked >= 8);
+}
+
+#[test]
+fn mlp_gradients_match_finite_differences() {
+    let device = cpu_autodiff();
+    let cfg = MlpConfig {
+        activation: ocm_learn::Activation::Tanh,
+        ..MlpConfig::relu(3, &[7, 5], 2)
+    };
+    let x = Tensor::<2>::from_data(
+        TensorData::new(
+            (0..12).map(|i| (i as f32 * 0.7).cos()).collect::<Vec<_>>(),
+            [4, 3],
+        ),
+        &device,
+    );
+    let t = Tensor::<2>::from_data(
+        TensorData::new(
+            (0..8).map(|i| (i as f32 * 0.3).sin()).collect::<Vec<_>>(),
+            [4, 2],
+        ),
+        &device,
+    );
+    let loss = |m: &Mlp| (m.forward(x.clone()) - t.clone()).powi_scalar(2).mean();
+    check_gradients(
+        cfg.init(&device, 4),
+        loss,
+        |m| m.layers.iter().map(|l| l.weight.val()).collect(),
+        |m, pi, k, h| {
+            let mut m = m.clone();
+            m.layers[pi].weight = m.layers[pi].weight.clone().map(|w| {
+                let dims = w.dims();
+                let mut v = values(w.clone());
+                v[k] += h;
+                Tensor::from_data(TensorData::new(v, dims), &w.device()).require_grad()
+            });
+            m
+        },
+    );
+}
+
+#[test]
+fn sequence_encoder_input_gradient_matches_finite_differences() {
+    // The encoder's gradient with respect to its input exercises every layer: embedding,
+    // positions, attention, feed-forward, the norms and the last-step readout.
+    let device = cpu_autodiff();
+    let enc = SequenceEncoderConfig {
+        input: 3,
+        d_model: 8,
+        n_heads: 2,
+        d_ff: 16,
+        n_layers: 2,
+        max_len: 4,
+    }
+    .init(&device, 9);
+    let base: Vec<f32> = (0..24).map(|i| (i as f32 * 0.41).sin()).collect();
+    let w: Vec<f32> = (0..16).map(|i| (i as f32 * 0.9).cos()).collect();
+    let weight = Tensor::<2>::from_data(TensorData::new(w, [2, 8]), &device);
+    let loss = |v: &[f32], track: bool| {
+        let mut x = Tensor::<3>::from_data(TensorData::new(v.to_vec(), [2, 4, 3]), &device);
+        if track {
+            x = x.require_grad();
+        }
+        ((enc.forward_last(x.clone()) * weight.clone()).sum(), x)
+    };
+    let (l, x) = loss(&base, true);
+    let g = values(x.grad(&l.backward()).unwrap());
+    for k in [0, 5, 11, 17, 23] {
+        let h = 1e-2f32;
+        let mut up = base.clone();
+        up[k] += h;
+        let mut down = base.clone();
+        down[k] -= h;
+        let fd = (f64::from(values(loss(&up, false).0)[0])
+            - f64::from(values(loss(&down, false).0)[0]))
+            / (2.0 * f64::from(h));
+        let ad = f64::from(g[k]);
+        assert!(
+            (fd - ad).abs() < 3e-3 + 3e-2 * ad.abs().max(fd.abs()),
+            "input {k}: autodiff {ad:.5} vs finite difference {fd:.5}"
+        );
+    }
+    // Only the last step is read out, but attention lets earlier steps influence it.
+    assert!(g[..3].iter().any(|v| v.abs() > 1e-4));
+}
+
+#[test]
+fn loss_curve_is_written_as_csv_and_png() {
+    let dir = std::env::temp_dir().join(format!("ocm-learn-curve-{}", std::process::id()));
+    let (x, y) = regression(7);
+    let report = train(
+        MlpConfig::relu(2, &[8], 1).init(&cpu_autodiff(), 2),
+        y.len(),
+        &small_cfg(4),
+        |m, b, d| mse(m, &x, &y, b, d),
+    )
+    .unwrap();
+    ocm_learn::write_curve(&dir, "loss", "test", &report.curve).unwrap();
+    let csv = std::fs::read_to_string(dir.join("loss.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines[0], "epoch,train_loss,val_loss,elapsed_s");
+    assert_eq!(lines.len(), 5);
+    let png = std::fs::read(dir.join("loss.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn training_refuses_bad_settings() {
+    let (x, y) = regression(8);
+    let plain = MlpConfig::relu(2, &[8], 1).init(&cpu(), 2);
+    let r = train(plain, y.len(), &small_cfg(1), |m, b, d| {
+        mse(m, &x, &y, b, d)
+    });
+    assert!(matches!(r, Err(LearnError::Config(_))), "{r:?}");
+    let zero_batch = TrainConfig {
+        batch_size: 0,
+        ..small_cfg(1)
+    };
+    let r = train(
+        MlpConfig::relu(2, &[8], 1).init(&cpu_autodiff(), 2),
+        y.len(),
+        &zero_batch,
+        |m, b, d| mse(m, &x, &y, b, d),
+    );
+    assert!(matches!(r, Err(LearnError::Config(_))));
+    let huge = TrainConfig {
+        learning_rate: 1e9,
+        ..small_cfg(5)
+    };
+    let r = train(
+        MlpConfig::relu(2, &[8], 1).init(&cpu_autodiff(), 2),
+        y.len(),
+        &huge,
+        |m, b, d| mse(m, &x, &y, b, d).mul_scalar(1e30).mul_scalar(1e30),
+    );
+    assert!(matches!(r, Err(LearnError::Diverged { .. })), "{r:?}");
+}

@@ -1,0 +1,119 @@
+//! The DIGIT gel (coarse mesh) pressed by the real indenter STLs of the set-up files, and the
+//! errors for bad inputs.
+
+use ocm_datadir::test_data;
+use ocm_tactile::TactileError;
+use ocm_tactile::gel::{Gel, GelMaterial};
+use ocm_tactile::indent::{IndentOptions, Indentation, Placement};
+use ocm_tactile::indenter::Indenter;
+use ocm_tactile::mask::{Grid, Mask};
+use ocm_tactile::setup::{digit_setups, read_setups};
+use std::path::PathBuf;
+
+fn digit_dir() -> Option<PathBuf> {
+    test_data("digit/indenter_settings.json").map(|p| p.parent().unwrap().to_path_buf())
+}
+
+/// All 70 set-ups resolve to closed indenter STLs.
+#[test]
+fn setups_resolve_to_closed_indenters() {
+    let Some(dir) = digit_dir() else { return };
+    let setups = digit_setups(&dir).unwrap();
+    assert_eq!(setups.len(), 70);
+    assert_eq!(setups.iter().filter(|s| s.unseen).count(), 8);
+    let mut seen = std::collections::BTreeSet::new();
+    for s in &setups {
+        if seen.insert(s.stl.clone()) {
+            let ind = Indenter::from_stl(&s.stl).unwrap();
+            let (lo, hi) = ind.bounds;
+            // Every indenter is a few millimetres to 3 cm across once in metres.
+            assert!(
+                hi[0] - lo[0] > 1e-3 && hi[0] - lo[0] < 0.04,
+                "{}: {lo:?} {hi:?}",
+                s.name
+            );
+            assert!(ind.volume() > 0.0);
+        }
+    }
+}
+
+/// The sphere set-up `sphere1` on the coarse gel for 20 steps (0.2 mm): every step converges
+/// with the penetration within tolerance, the force grows with depth, and the contact mask sits
+/// under the indenter.
+#[test]
+fn sphere_on_coarse_gel() {
+    let (Some(dir), Some(mesh)) = (digit_dir(), test_data("digit/DIGIT_remesh2.vtk")) else {
+        return;
+    };
+    let gel = Gel::digit(&mesh, GelMaterial::default()).unwrap();
+    let setups = digit_setups(&dir).unwrap();
+    let s = setups.iter().find(|s| s.name == "sphere1").unwrap();
+    let ind = Indenter::from_stl(&s.stl).unwrap();
+    let mut o = IndentOptions::protocol(gel.material.young_pa);
+    o.steps = 20;
+    let mut run = Indentation::new(&s.name, &gel, &ind, s.placement, o).unwrap();
+    let out = run.run(|_| {}).unwrap();
+    let mut last_f = 0.0;
+    for st in &out {
+        assert!(st.max_penetration_m <= o.contact.penetration_tol_m);
+        assert!(st.indenter_force_n[2] >= last_f, "step {}", st.step);
+        last_f = st.indenter_force_n[2];
+    }
+    assert!(last_f > 0.0);
+    let grid = Grid::for_gel(&gel);
+    let m = Mask::from_displacement(&gel, &grid, &out.last().unwrap().displacement);
+    let st = m.stats();
+    assert!(st.area_m2 > 0.0);
+    let d = ((st.centroid_m[0] - s.placement.xy_m[0]).powi(2)
+        + (st.centroid_m[1] - s.placement.xy_m[1]).powi(2))
+    .sqrt();
+    // The coarse gel's top is convex: the sphere first touches off its tip, towards the apex.
+    assert!(
+        d < 2e-3,
+        "mask centroid {:?} is {d} m from the set-up",
+        st.centroid_m
+    );
+}
+
+/// A set-up naming a missing indenter, an open STL, and an indenter placed off the gel each give
+/// an error that says what and where.
+#[test]
+fn bad_inputs_give_clear_errors() {
+    let (Some(dir), Some(mesh)) = (digit_dir(), test_data("digit/DIGIT_remesh2.vtk")) else {
+        return;
+    };
+    let tmp = std::env::temp_dir().join(format!("ocm-tactile-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).unwrap();
+    let json = tmp.join("setups.json");
+    std::fs::write(
+        &json,
+        r#"[{"name": "ghost1", "filename_stl": "Indenter/ghost.STL", "translation": [0, 10, 2.05], "orientation": [0, 0, 0]}]"#,
+    )
+    .unwrap();
+    let e = read_setups(&json, &dir.join("indenters"), false)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("ghost1") && e.contains("ghost.STL"), "{e}");
+
+    // An STL with one facet dropped is open.
+    let bytes = std::fs::read(dir.join("indenters/edge.stl")).unwrap();
+    let n = u32::from_le_bytes(bytes[80..84].try_into().unwrap()) as usize;
+    let mut cut = bytes[..84 + 50 * (n - 1)].to_vec();
+    cut[80..84].copy_from_slice(&((n - 1) as u32).to_le_bytes());
+    let open = tmp.join("open.stl");
+    std::fs::write(&open, cut).unwrap();
+    let e = Indenter::from_stl(&open).unwrap_err().to_string();
+    assert!(e.contains("not closed"), "{e}");
+
+    let gel = Gel::digit(&mesh, GelMaterial::default()).unwrap();
+    let ind = Indenter::from_stl(dir.join("indenters/sphere.stl")).unwrap();
+    let off = Placement {
+        xy_m: [0.03, 0.05],
+        euler_deg: [0.0; 3],
+    };
+    let o = IndentOptions::protocol(gel.material.young_pa);
+    let e = Indentation::new("far", &gel, &ind, off, o).err().unwrap();
+    assert!(matches!(e, TactileError::OffGel { .. }), "{e}");
+    assert!(e.to_string().contains("far") && e.to_string().contains("touches no"));
+    std::fs::remove_dir_all(&tmp).ok();
+}
