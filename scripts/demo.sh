@@ -13,6 +13,6 @@ ocm=target/release/ocm
 "$ocm" lut check "$out/ocm_default.lut"
 "$ocm" lut check "$out/ocm_default.lut" --json > "$out/lut_check.json"
 "$ocm" lut plot "$out/ocm_default.lut" --out "$out/plots"
-"$ocm" lut export "$out/ocm_default.lut" --csv "$out/tables"
+"$ocm" lut export "$out/ocm_default.lut" --out "$out/tables"
 "$ocm" track --out "$out/track"
 echo "demo: results in $out/"

@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Installs what the ocm build and tests need on a fresh machine:
-# the Cortex-M4F Rust target, clippy/rustfmt, and QEMU for the emulated MCU.
+# the Cortex-M4F Rust target, clippy/rustfmt, QEMU for the emulated MCU, and a Python
+# virtual environment (.venv) with the packages the interop tests check against.
 # Idempotent and quiet when everything is already there.
 set -euo pipefail
+cd "$(dirname "$0")/.."
 
 if ! command -v cargo >/dev/null 2>&1; then
     echo "setup: cargo not found; install Rust (rustup) first" >&2
@@ -29,4 +31,21 @@ if ! command -v qemu-system-arm >/dev/null 2>&1; then
     export DEBIAN_FRONTEND=noninteractive
     $SUDO apt-get update -qq
     $SUDO apt-get install -y -qq --no-install-recommends qemu-system-arm >/dev/null
+fi
+
+# Python packages of the interop tests (numpy opens our NPY files), in a virtual environment
+# so the system's Python stays untouched.
+if [ ! -x .venv/bin/python3 ] || ! cmp -s scripts/requirements-test.txt .venv/requirements-installed.txt; then
+    if ! python3 -m venv .venv >/dev/null 2>&1; then
+        echo "setup: python3 -m venv failed; installing python3-venv"
+        SUDO=""
+        if [ "$(id -u)" != 0 ] && command -v sudo >/dev/null 2>&1; then SUDO=sudo; fi
+        export DEBIAN_FRONTEND=noninteractive
+        $SUDO apt-get update -qq
+        $SUDO apt-get install -y -qq --no-install-recommends python3-venv >/dev/null
+        python3 -m venv .venv
+    fi
+    echo "setup: installing Python test packages into .venv"
+    .venv/bin/python3 -m pip install -q --disable-pip-version-check -r scripts/requirements-test.txt
+    cp scripts/requirements-test.txt .venv/requirements-installed.txt
 fi

@@ -5,6 +5,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+# Interop tests check our files with Python packages from the virtual environment.
+export OCM_PYTHON="$PWD/.venv/bin/python3"
 
 echo "== cargo fmt --check"
 cargo fmt --all -- --check

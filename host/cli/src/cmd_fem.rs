@@ -9,9 +9,22 @@ use ocm_fem::scene::Scene;
 use ocm_fem::sweep;
 use std::path::PathBuf;
 
-const BELLOWS_MESH: &str = "../shared/data/bellows-manipulator/ManipulatorWhole25.vtk";
-const PRESSURE_TABLE: &str = "../shared/data/bellows-manipulator/Pressure_vs_Pos.csv";
-const E50_CSV: &str = "../shared/data/bellows-manipulator/E50_stress_stretch.csv";
+/// Data files, relative to the data directory (`--data`, `OCM_DATA_DIR` or `../shared/data`).
+pub const BELLOWS_MESH: &str = "bellows-manipulator/ManipulatorWhole25.vtk";
+const PRESSURE_TABLE: &str = "bellows-manipulator/Pressure_vs_Pos.csv";
+const E50_CSV: &str = "bellows-manipulator/E50_stress_stretch.csv";
+
+/// `explicit`, else `rel` inside the data directory (`data`, `OCM_DATA_DIR` or `../shared/data`).
+pub fn data_path(
+    explicit: Option<PathBuf>,
+    data: Option<&std::path::Path>,
+    rel: &str,
+) -> anyhow::Result<PathBuf> {
+    match explicit {
+        Some(p) => Ok(p),
+        None => Ok(ocm_datadir::data_file(data, rel)?),
+    }
+}
 
 /// FEM subcommands.
 #[derive(clap::Subcommand, Debug)]
@@ -33,10 +46,17 @@ pub enum FemCommand {
         json: bool,
     },
     /// Sweeps the bellows chamber pressures over a grid and writes the Fig 4.3 states as CSV.
+    ///
+    /// The material defaults to the committed calibration (host/fem/calibration/bellows_material.toml).
+    /// Against the reference table it reports the raw TCP RMSE (mesh frame, nothing fitted) and the
+    /// RMSE after the one fitted parameter, a rotation of the reference's x-y frame about z.
     Sweep {
-        /// Bellows mesh (VTK, mm).
-        #[arg(long, default_value = BELLOWS_MESH)]
-        mesh: PathBuf,
+        /// Data directory (default: OCM_DATA_DIR, else ../shared/data).
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// Bellows mesh (VTK, mm); default: the data directory's ManipulatorWhole25.vtk.
+        #[arg(long)]
+        mesh: Option<PathBuf>,
         /// Pressure values per chamber, kPa (the grid is their cube).
         #[arg(
             long,
@@ -45,15 +65,15 @@ pub enum FemCommand {
             allow_hyphen_values = true
         )]
         values_kpa: Vec<f64>,
-        /// Constitutive law.
-        #[arg(long, value_enum, default_value = "neo-hookean-bulk")]
-        law: LawArg,
-        /// Young's modulus, Pa.
-        #[arg(long, default_value_t = 1.2e6)]
-        young_pa: f64,
-        /// Poisson's ratio.
-        #[arg(long, default_value_t = 0.45)]
-        poisson: f64,
+        /// Constitutive law (default: the calibrated one).
+        #[arg(long, value_enum)]
+        law: Option<LawArg>,
+        /// Young's modulus, Pa (default: the calibrated one).
+        #[arg(long)]
+        young_pa: Option<f64>,
+        /// Poisson's ratio (default: the calibrated one).
+        #[arg(long)]
+        poisson: Option<f64>,
         /// Rigid parts (base connectors, top frame): true rigid bodies or a stiff penalty.
         #[arg(long, value_enum, default_value = "constraint")]
         rigid: RigidArg,
@@ -63,10 +83,17 @@ pub enum FemCommand {
         /// Nodal displacement snapshots (states x 3N) as .npy.
         #[arg(long)]
         npy: Option<PathBuf>,
-        /// Reference table to compare TCPs with (same pressures).
-        #[arg(long, default_value = PRESSURE_TABLE)]
-        reference: PathBuf,
+        /// Reference table to compare TCPs with (same pressures); default: the data directory's
+        /// Pressure_vs_Pos.csv when present.
+        #[arg(long)]
+        reference: Option<PathBuf>,
         /// Print a JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Prints the committed bellows material calibration and its provenance.
+    Material {
+        /// Print JSON.
         #[arg(long)]
         json: bool,
     },
@@ -80,18 +107,25 @@ pub enum FemCommand {
 pub enum CalibrateCommand {
     /// Fits incompressible Neo-Hookean and Mooney-Rivlin to a uniaxial stress-stretch CSV (stress in kPa).
     Fit {
-        /// CSV with columns stretch,stress.
-        #[arg(long, default_value = E50_CSV)]
-        csv: PathBuf,
+        /// Data directory (default: OCM_DATA_DIR, else ../shared/data).
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// CSV with columns stretch,stress; default: the data directory's E50_stress_stretch.csv.
+        #[arg(long)]
+        csv: Option<PathBuf>,
         /// Print JSON.
         #[arg(long)]
         json: bool,
     },
-    /// (E, nu) grid search (Ch.4.4.3): RMSE of bellows TCPs against a reference table.
+    /// (E, nu) grid search (Ch.4.4.3): RMSE of bellows TCPs against a reference table, after the
+    /// best rotation of the reference frame about z (the raw RMSE is printed beside it).
     Grid {
-        /// Bellows mesh (VTK, mm).
-        #[arg(long, default_value = BELLOWS_MESH)]
-        mesh: PathBuf,
+        /// Data directory (default: OCM_DATA_DIR, else ../shared/data).
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// Bellows mesh (VTK, mm); default: the data directory's ManipulatorWhole25.vtk.
+        #[arg(long)]
+        mesh: Option<PathBuf>,
         /// Young's moduli to try, Pa.
         #[arg(
             long,
@@ -109,12 +143,13 @@ pub enum CalibrateCommand {
             default_value = "20:0:0,0:20:0,0:0:20,10:10:0,-20:-20:-20,30:0:10"
         )]
         states: Vec<String>,
-        /// Reference table (pressures kPa, positions m).
-        #[arg(long, default_value = PRESSURE_TABLE)]
-        reference: PathBuf,
-        /// Constitutive law.
-        #[arg(long, value_enum, default_value = "neo-hookean-bulk")]
-        law: LawArg,
+        /// Reference table (pressures kPa, positions m); default: the data directory's
+        /// Pressure_vs_Pos.csv.
+        #[arg(long)]
+        reference: Option<PathBuf>,
+        /// Constitutive law (default: the calibrated one).
+        #[arg(long, value_enum)]
+        law: Option<LawArg>,
         /// Print JSON.
         #[arg(long)]
         json: bool,
@@ -258,7 +293,45 @@ pub fn run(cmd: FemCommand) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        FemCommand::Material { json } => {
+            let m = ocm_fem::calibration::bellows_material();
+            if json {
+                println!("{}", serde_json::to_string(&m)?);
+            } else {
+                let p = &m.provenance;
+                println!(
+                    "bellows material: {:?}, E = {:.3} MPa, nu = {}, density {} kg/m^3",
+                    m.law,
+                    m.young_pa * 1e-6,
+                    m.poisson,
+                    m.density_kg_m3
+                );
+                let mm =
+                    |v: Option<f64>| v.map_or("not recorded".to_string(), |x| format!("{x:.2} mm"));
+                println!(
+                    "from `{}` on {} against {}: best cell RMSE {} aligned, {} raw",
+                    p.command,
+                    p.mesh,
+                    p.reference,
+                    mm(p.grid_best_rmse_aligned_mm),
+                    mm(p.grid_best_rmse_raw_mm)
+                );
+                println!(
+                    "{}-state sweep: TCP RMSE {} raw (mesh frame), {:.2} mm after rotating the reference frame about z ({}); lateral gain FEM/ref {} (not fitted)",
+                    p.sweep_states,
+                    mm(p.sweep_rmse_raw_mm),
+                    p.sweep_rmse_aligned_mm,
+                    p.sweep_frame_rotation_deg
+                        .map_or("angle not recorded".to_string(), |d| format!("{d:.1} deg")),
+                    p.sweep_lateral_gain
+                        .map_or("not recorded".to_string(), |g| format!("{g:.2}"))
+                );
+                println!("objective: {}", p.objective);
+            }
+            Ok(())
+        }
         FemCommand::Sweep {
+            data,
             mesh,
             values_kpa,
             law,
@@ -270,14 +343,20 @@ pub fn run(cmd: FemCommand) -> anyhow::Result<()> {
             reference,
             json,
         } => {
-            let cfg = BellowsConfig {
-                law: law.into(),
-                young_pa,
-                poisson,
-                rigid: rigid.into(),
-                ..BellowsConfig::default()
+            let mesh = data_path(mesh, data.as_deref(), BELLOWS_MESH)?;
+            let reference = match reference {
+                Some(r) => Some(r),
+                None => ocm_datadir::data_file(data.as_deref(), PRESSURE_TABLE).ok(),
             };
-            let b = Bellows::load(&mesh, cfg)?;
+            let d = BellowsConfig::default();
+            let cfg = BellowsConfig {
+                law: law.map_or(d.law, Into::into),
+                young_pa: young_pa.unwrap_or(d.young_pa),
+                poisson: poisson.unwrap_or(d.poisson),
+                rigid: rigid.into(),
+                ..d
+            };
+            let b = Bellows::load(&mesh, cfg.clone())?;
             let states = sweep::grid(&values_kpa);
             let pb = bar(states.len(), "pressure states");
             let mut snaps: Vec<Vec<f64>> = vec![];
@@ -295,21 +374,30 @@ pub fn run(cmd: FemCommand) -> anyhow::Result<()> {
             if let Some(p) = &npy {
                 ocm_fem::npy::write_snapshots(p, &snaps)?;
             }
-            let cmp = if reference.exists() {
-                Some(sweep::compare(&pts, &sweep::read_reference(&reference)?)?)
-            } else {
-                None
+            let cmp = match &reference {
+                Some(r) => Some(sweep::compare(&pts, &sweep::read_reference(r)?)?),
+                None => None,
             };
             if json {
                 println!(
                     "{}",
-                    serde_json::json!({ "states": pts.len(), "seconds": secs, "csv": out, "comparison": cmp })
+                    serde_json::json!({ "states": pts.len(), "seconds": secs, "csv": out,
+                        "material": { "law": cfg.law, "young_pa": cfg.young_pa, "poisson": cfg.poisson },
+                        "comparison": cmp,
+                        "alignment": "rmse_aligned_m fits one angle: the rotation of the reference x-y frame about z; lateral_gain is reported, not fitted" })
                 );
             } else {
-                println!("{} states in {secs:.1} s -> {}", pts.len(), out.display());
-                if let Some(c) = cmp {
+                println!(
+                    "{} states ({:?}, E = {:.3} MPa, nu = {}) in {secs:.1} s -> {}",
+                    pts.len(),
+                    cfg.law,
+                    cfg.young_pa * 1e-6,
+                    cfg.poisson,
+                    out.display()
+                );
+                if let (Some(c), Some(reference)) = (cmp, &reference) {
                     println!(
-                        "vs {}: {} matched, TCP RMSE {:.2} mm (mesh frame), best frame rotation {:.1} deg -> RMSE {:.2} mm, lateral gain FEM/ref {:.2}",
+                        "vs {}: {} matched, TCP RMSE {:.2} mm raw (mesh frame, nothing fitted); fitting one rotation of the reference frame about z ({:.1} deg) -> {:.2} mm; lateral gain FEM/ref {:.2} (not fitted)",
                         reference.display(),
                         c.matched,
                         c.rmse_m * 1e3,
@@ -321,7 +409,8 @@ pub fn run(cmd: FemCommand) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        FemCommand::Calibrate(CalibrateCommand::Fit { csv, json }) => {
+        FemCommand::Calibrate(CalibrateCommand::Fit { data, csv, json }) => {
+            let csv = data_path(csv, data.as_deref(), E50_CSV)?;
             let data = calibrate::read_stress_stretch_kpa(&csv)?;
             let nh = calibrate::fit_neo_hookean(&data)?;
             let mr = calibrate::fit_mooney_rivlin(&data)?;
@@ -352,6 +441,7 @@ pub fn run(cmd: FemCommand) -> anyhow::Result<()> {
             Ok(())
         }
         FemCommand::Calibrate(CalibrateCommand::Grid {
+            data,
             mesh,
             youngs_pa,
             poissons,
@@ -373,39 +463,58 @@ pub fn run(cmd: FemCommand) -> anyhow::Result<()> {
                     Ok([v[0], v[1], v[2]])
                 })
                 .collect::<anyhow::Result<_>>()?;
+            let mesh = data_path(mesh, data.as_deref(), BELLOWS_MESH)?;
+            let reference = data_path(reference, data.as_deref(), PRESSURE_TABLE)?;
+            let law: Law = law.map_or(BellowsConfig::default().law, Into::into);
             let refs = sweep::read_reference(&reference)?;
+            let mut raw = std::collections::HashMap::new();
             let pb = bar(youngs_pa.len() * poissons.len(), "(E, nu) grid");
             let mut k = 0;
             let (cells, best) = calibrate::grid_search(&youngs_pa, &poissons, |e, nu| {
                 k += 1;
                 pb.set_position(k);
                 let cfg = BellowsConfig {
-                    law: law.into(),
+                    law,
                     young_pa: e,
                     poisson: nu,
                     ..BellowsConfig::default()
                 };
                 let b = Bellows::load(&mesh, cfg)?;
                 let pts = sweep::run(&b, &states, |_, _, _| {})?;
-                Ok(sweep::compare(&pts, &refs)?.rmse_aligned_m)
+                let c = sweep::compare(&pts, &refs)?;
+                raw.insert((e.to_bits(), nu.to_bits()), c.rmse_m);
+                Ok(c.rmse_aligned_m)
             })?;
             pb.finish_and_clear();
+            let raw_of = |c: &calibrate::GridCell| {
+                raw.get(&(c.young_pa.to_bits(), c.poisson.to_bits()))
+                    .copied()
+                    .unwrap_or(f64::NAN)
+            };
             if json {
-                println!("{}", serde_json::json!({ "cells": cells, "best": best }));
+                let raw_cells: Vec<f64> = cells.iter().map(raw_of).collect();
+                println!(
+                    "{}",
+                    serde_json::json!({ "cells": cells, "raw_rmse_m": raw_cells, "best": best,
+                        "best_raw_rmse_m": raw_of(&best),
+                        "error": "TCP RMSE after the best rotation of the reference frame about z, m" })
+                );
             } else {
                 for c in &cells {
                     println!(
-                        "E = {:8.3} MPa, nu = {:.3}: TCP RMSE {:.3} mm",
+                        "E = {:8.3} MPa, nu = {:.3}: TCP RMSE {:.3} mm aligned (frame rotated about z), {:.3} mm raw",
                         c.young_pa * 1e-6,
                         c.poisson,
-                        c.error * 1e3
+                        c.error * 1e3,
+                        raw_of(c) * 1e3
                     );
                 }
                 println!(
-                    "best: E = {:.3} MPa, nu = {:.3}, RMSE {:.3} mm",
+                    "best: E = {:.3} MPa, nu = {:.3}, RMSE {:.3} mm aligned, {:.3} mm raw",
                     best.young_pa * 1e-6,
                     best.poisson,
-                    best.error * 1e3
+                    best.error * 1e3,
+                    raw_of(&best) * 1e3
                 );
             }
             Ok(())

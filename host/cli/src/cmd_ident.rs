@@ -4,17 +4,40 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use ocm_ident::generator::{Spec, generate};
+use ocm_ident::baseline::SeriesModel;
+use ocm_ident::synth::{Spec, generate};
 use ocm_ident::{Cause, Config, Kind, report, softarm};
+
+/// Baseline of `series` records without `sim_` columns.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SeriesBaseline {
+    /// Linear state-space model (subspace identification refined on free-run simulation
+    /// error, order by BIC): for dynamic systems; the static map is reported beside it.
+    StateSpace,
+    /// Static affine map y = A u + b: for quasi-static systems; the state-space model is
+    /// reported beside it.
+    Static,
+}
 
 /// Arguments of `ocm ident`.
 #[derive(clap::Args, Debug)]
 pub struct IdentArgs {
     /// Measured data: a CSV in the kind's schema, or the soft-arm MATLAB file (`.mat`).
+    ///
+    /// Schema conventions: axial force_n tension positive; pose x_mm, y_mm, z_mm in the base
+    /// frame of a standing segment with z from base to tip (rotate a hanging mount's log
+    /// first), load_n axial tension; series u_<name> inputs, y_<name> measured outputs, and
+    /// optionally sim_<name> (another simulator's prediction of y_<name>: then ident explains
+    /// measured minus simulated) and x_<name> (its states, e.g. a position whose velocity
+    /// friction follows). Units come from the name's suffix (_n, _m, _mm, _kpa, _pa, _rad, _s).
+    /// A record that contradicts the conventions gets a warning in the report.
     pub file: PathBuf,
     /// Record kind: axial, bending, pose or series (a `.mat` file is always series).
     #[arg(long, default_value = "series")]
     pub kind: String,
+    /// Baseline of a `series` record without sim_ columns (a .mat soft-arm file is static).
+    #[arg(long, value_enum, default_value_t = SeriesBaseline::StateSpace)]
+    pub baseline: SeriesBaseline,
     /// Print the JSON report instead of the text summary.
     #[arg(long)]
     pub json: bool,
@@ -94,9 +117,16 @@ pub fn run(args: IdentArgs) -> anyhow::Result<()> {
     } else {
         ocm_ident::data::read_csv(&args.file, kind)?
     };
+    let series_model = match args.baseline {
+        // the soft arm is read as quasi-static, its published figures are on that baseline
+        _ if is_mat => SeriesModel::Static,
+        SeriesBaseline::StateSpace => SeriesModel::StateSpace,
+        SeriesBaseline::Static => SeriesModel::Static,
+    };
     let cfg = Config {
         alpha: args.alpha,
         min_gain_pct: args.min_gain,
+        series_model,
         ..Config::default()
     };
     let id = ocm_ident::identify(&record, &cfg)?;

@@ -8,6 +8,7 @@ use ocm_lutgen::OcmModel;
 use ocm_lutgen::config::Config;
 use ocm_lutgen::tables::{build_tables, check_accuracy};
 use ocm_shared::lut::{LengthM, LutError, LutImage};
+use ocm_shared::params::ParamPreset;
 
 use crate::plot::{Chart, Series};
 
@@ -19,9 +20,13 @@ pub enum LutCommand {
         /// Output image file.
         #[arg(long)]
         out: PathBuf,
-        /// TOML configuration (OCM parameters and grids); Table 3.1 defaults if absent.
+        /// TOML configuration (OCM parameters and grids); the calibrated
+        /// parameters and the 0-30 kPa grids if absent.
         #[arg(long)]
         config: Option<PathBuf>,
+        /// Named OCM parameter set, in place of the configuration's `[ocm]`.
+        #[arg(long, value_enum, conflicts_with = "config")]
+        params: Option<Params>,
     },
     /// Validate an image and measure its inverse-lookup error against the f64 model.
     Check {
@@ -30,6 +35,9 @@ pub enum LutCommand {
         /// Configuration the image was built with.
         #[arg(long)]
         config: Option<PathBuf>,
+        /// Named OCM parameter set the image was built with.
+        #[arg(long, value_enum, conflicts_with = "config")]
+        params: Option<Params>,
         /// Off-grid points checked per table.
         #[arg(long, default_value_t = 4000)]
         points: usize,
@@ -49,35 +57,62 @@ pub enum LutCommand {
     Export {
         /// The image.
         file: PathBuf,
-        /// Output directory.
+        /// Output directory for `axial.csv` and `bending.csv`.
         #[arg(long)]
-        csv: PathBuf,
+        out: PathBuf,
     },
+}
+
+/// Named OCM parameter sets (`docs/model.md`, "Calibrated parameters").
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Params {
+    /// Table 3.1 geometry, stiffness scaled so that 0-30 kPa spans strain 0-0.6 (the default).
+    Calibrated,
+    /// Table 3.1 as printed (k_b 1.3 N/m, k_h 0.1 N/m: strain 0.6 at 1.5 kPa).
+    #[value(name = "table-3.1")]
+    Table31,
+}
+
+impl From<Params> for ParamPreset {
+    fn from(p: Params) -> Self {
+        match p {
+            Params::Calibrated => Self::Calibrated,
+            Params::Table31 => Self::Table31,
+        }
+    }
 }
 
 /// Runs an `ocm lut` subcommand.
 pub fn run(cmd: LutCommand) -> Result<()> {
     match cmd {
-        LutCommand::Build { out, config } => build(&out, config.as_deref()),
+        LutCommand::Build {
+            out,
+            config,
+            params,
+        } => build(&out, config.as_deref(), params),
         LutCommand::Check {
             file,
             config,
+            params,
             points,
             json,
-        } => check(&file, config.as_deref(), points, json),
+        } => check(&file, config.as_deref(), params, points, json),
         LutCommand::Plot { file, out } => plot(&file, &out),
-        LutCommand::Export { file, csv } => export(&file, &csv),
+        LutCommand::Export { file, out } => export(&file, &out),
     }
 }
 
-fn model_from(config: Option<&Path>) -> Result<(Config, OcmModel)> {
-    let cfg = Config::load(config)?;
+fn model_from(config: Option<&Path>, params: Option<Params>) -> Result<(Config, OcmModel)> {
+    let mut cfg = Config::load(config)?;
+    if let Some(p) = params {
+        cfg.ocm = ParamPreset::from(p).ocm();
+    }
     let model = OcmModel::new(cfg.ocm)?;
     Ok((cfg, model))
 }
 
-fn build(out: &Path, config: Option<&Path>) -> Result<()> {
-    let (cfg, model) = model_from(config)?;
+fn build(out: &Path, config: Option<&Path>, params: Option<Params>) -> Result<()> {
+    let (cfg, model) = model_from(config, params)?;
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template("{spinner} sampling tables [{bar:30}] {pos}/{len} rows")
             .expect("static template is valid"),
@@ -106,8 +141,14 @@ fn read_image(file: &Path) -> Result<Vec<u8>> {
     std::fs::read(file).with_context(|| format!("reading LUT image {}", file.display()))
 }
 
-fn check(file: &Path, config: Option<&Path>, points: usize, json: bool) -> Result<()> {
-    let (_, model) = model_from(config)?;
+fn check(
+    file: &Path,
+    config: Option<&Path>,
+    params: Option<Params>,
+    points: usize,
+    json: bool,
+) -> Result<()> {
+    let (_, model) = model_from(config, params)?;
     let bytes = read_image(file)?;
     if let Err(LutError::CrcMismatch { stored, computed }) = LutImage::parse(&bytes) {
         if json {

@@ -12,8 +12,7 @@ use ocm_lutgen::stack::{AssumptionConfig, AssumptionReport, measure_assumptions}
 pub enum ModelCommand {
     /// Add `force_n` (eq 3.9) to a CSV with columns `time_s,pressure_kpa,strain`.
     Axial {
-        /// Input CSV; other columns are kept.
-        #[arg(long)]
+        /// Input CSV with the columns `time_s,pressure_kpa,strain`; other columns are kept.
         input: PathBuf,
         /// Output CSV: the input columns plus `force_n`.
         #[arg(long)]

@@ -93,6 +93,11 @@ pub struct TrackArgs {
     /// hil-sim/lab.toml); --seed, --short and --duration override it.
     #[arg(long)]
     config: Option<PathBuf>,
+    /// OCM parameter set of the plant and the LUT, in place of a config
+    /// file: `calibrated` (default) or `table-3.1` (with a vacuum-capable
+    /// regulator, -20..35 kPa, which its softness needs).
+    #[arg(long, value_enum, conflicts_with = "config")]
+    params: Option<crate::cmd_lut::Params>,
 }
 
 /// Reads the lab settings from TOML. Command limits the file leaves out
@@ -152,9 +157,10 @@ pub fn run(args: TrackArgs) -> Result<()> {
             SCENARIOS.join(", ")
         );
     };
-    let base = match &args.config {
-        Some(path) => read_config(path)?,
-        None => SimConfig::default(),
+    let base = match (&args.config, args.params) {
+        (Some(path), _) => read_config(path)?,
+        (None, Some(p)) => SimConfig::with_preset(p.into()),
+        (None, None) => SimConfig::default(),
     };
     let cfg = SimConfig {
         seed: args.seed.unwrap_or(base.seed),

@@ -4,8 +4,11 @@ use clap::{Parser, Subcommand};
 
 mod cmd_fem;
 mod cmd_ident;
+mod cmd_learn;
 mod cmd_lut;
 mod cmd_model;
+mod cmd_mor;
+mod cmd_tactile;
 mod cmd_track;
 mod plot;
 mod plot_track;
@@ -33,6 +36,15 @@ enum Command {
     Fem(cmd_fem::FemCommand),
     /// Find what the model gets wrong in measured data, name the cause, extend the model.
     Ident(cmd_ident::IdentArgs),
+    /// Model-order reduction of the bellows FEM: snapshots, POD, reduced model, X_S datasets.
+    #[command(subcommand)]
+    Mor(cmd_mor::MorCommand),
+    /// Learned dynamics of the bellows manipulator: forward Transformer-PINN and inverse model.
+    #[command(subcommand)]
+    Learn(cmd_learn::LearnCommand),
+    /// DIGIT tactile FEM: rigid indenters pressed into the gel, contact masks, metrics.
+    #[command(subcommand)]
+    Tactile(cmd_tactile::TactileCommand),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -43,5 +55,8 @@ fn main() -> anyhow::Result<()> {
         Command::Track(args) => cmd_track::run(args),
         Command::Fem(cmd) => cmd_fem::run(cmd),
         Command::Ident(args) => cmd_ident::run(args),
+        Command::Mor(cmd) => cmd_mor::run(cmd),
+        Command::Learn(cmd) => cmd_learn::run(cmd),
+        Command::Tactile(cmd) => cmd_tactile::run(cmd),
     }
 }

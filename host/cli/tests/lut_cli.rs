@@ -87,7 +87,7 @@ fn build_check_plot_export() {
         "lut",
         "export",
         lut.to_str().unwrap(),
-        "--csv",
+        "--out",
         csv_dir.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", text(&out));
@@ -96,7 +96,7 @@ fn build_check_plot_export() {
     assert_eq!(lines.next(), Some("strain,pressure_kpa,force_n"));
     assert_eq!(lines.count(), 16 * 129);
     // Exported values are the model's.
-    let model = OcmModel::new(OcmParams::default()).unwrap();
+    let model = OcmModel::new(OcmParams::CALIBRATED).unwrap();
     for line in axial.lines().skip(1).step_by(97) {
         let v: Vec<f64> = line.split(',').map(|x| x.parse().unwrap()).collect();
         let exact = model.axial_force_n(v[0], v[1] * 1e3);
@@ -154,13 +154,12 @@ fn model_axial_adds_the_force_column() {
     let out = ocm(&[
         "model",
         "axial",
-        "--input",
         input.to_str().unwrap(),
         "--out",
         output.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", text(&out));
-    let model = OcmModel::new(OcmParams::default()).unwrap();
+    let model = OcmModel::new(OcmParams::CALIBRATED).unwrap();
     let written = std::fs::read_to_string(&output).unwrap();
     let mut lines = written.lines();
     assert_eq!(
@@ -202,7 +201,6 @@ fn model_axial_names_file_line_and_column_of_bad_input() {
         let out = ocm(&[
             "model",
             "axial",
-            "--input",
             input.to_str().unwrap(),
             "--out",
             output.to_str().unwrap(),

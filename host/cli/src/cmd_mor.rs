@@ -1,0 +1,739 @@
+//! `ocm mor`: model-order reduction of the bellows FEM: snapshots, POD basis, reduced model with
+//! ECSW, error-versus-speed curve, and sharded datasets of the compact state X_S.
+
+use crate::cmd_fem::{BELLOWS_MESH, data_path};
+use crate::plot::{Chart, Series};
+use anyhow::{Context, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use nalgebra::{DMatrix, DVector};
+use ocm_fem::bellows::{Bellows, BellowsConfig};
+use ocm_fem::npy;
+use ocm_mor::dataset::{self, DatasetSpec, ModelKind};
+use ocm_mor::drive::{self, DriveConfig};
+use ocm_mor::pod::{PodOptions, Truncation};
+use ocm_mor::rom::ReducedModel;
+use ocm_mor::store::{self, PodRecord, ReducedProbe, RomRecord};
+use ocm_mor::xs::{XS_DIM, XsProbe};
+use ocm_mor::{full, run};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Model-order reduction subcommands.
+#[derive(clap::Subcommand, Debug)]
+pub enum MorCommand {
+    /// Drives the full bellows FEM (implicit Euler, Rayleigh damping, calibrated material) with
+    /// seeded random pressure sequences (-20..35 kPa steps, ramps, holds) and tip forces (<= 2 N)
+    /// and stores the nodal displacement snapshots, the inputs and X_S.
+    Snapshots {
+        #[command(flatten)]
+        mesh: MeshArgs,
+        /// Training sequences.
+        #[arg(long, default_value_t = 8)]
+        sequences: usize,
+        /// Held-out sequences (simulated after the training ones, never used to fit).
+        #[arg(long, default_value_t = 2)]
+        held_out: usize,
+        /// Steps per sequence (dt = 0.01 s).
+        #[arg(long, default_value_t = 100)]
+        steps: usize,
+        /// Seed of the inputs.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Print a JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// POD basis of the training snapshots by randomized SVD; reports singular values, captured
+    /// energy and the projection error of the held-out snapshots. With --bench, times the SVD of a
+    /// seeded Gaussian matrix of the dissertation's size instead.
+    Pod {
+        #[command(flatten)]
+        mesh: MeshArgs,
+        /// Snapshot folder (from `ocm mor snapshots`).
+        #[arg(long, required_unless_present = "bench")]
+        snapshots: Option<PathBuf>,
+        /// Keep exactly this many modes.
+        #[arg(long)]
+        rank: Option<usize>,
+        /// Keep the fewest modes that capture this fraction of the energy.
+        #[arg(long, default_value_t = 0.9999)]
+        energy: f64,
+        /// Largest rank searched with --energy.
+        #[arg(long, default_value_t = 120)]
+        max_rank: usize,
+        /// Oversampling of the range finder.
+        #[arg(long, default_value_t = 10)]
+        oversampling: usize,
+        /// Power iterations.
+        #[arg(long, default_value_t = 2)]
+        power_iterations: usize,
+        /// Output folder for basis.npy and pod.json.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Benchmark: SVD of a rows x cols Gaussian matrix to --rank (default 1223).
+        #[arg(long)]
+        bench: bool,
+        /// Benchmark rows.
+        #[arg(long, default_value_t = 12_981)]
+        rows: usize,
+        /// Benchmark columns.
+        #[arg(long, default_value_t = 20_000)]
+        cols: usize,
+        /// Print a JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Builds the Galerkin reduced model on a basis, hyper-reduces it with ECSW (NNLS on element
+    /// contributions of the training snapshots), and scores it on the held-out sequences.
+    Reduce {
+        #[command(flatten)]
+        mesh: MeshArgs,
+        /// Snapshot folder.
+        #[arg(long)]
+        snapshots: PathBuf,
+        /// Basis folder (from `ocm mor pod`).
+        #[arg(long)]
+        basis: PathBuf,
+        /// ECSW relative tolerance on the training forces.
+        #[arg(long, default_value_t = 1e-3)]
+        tolerance: f64,
+        /// Use every k-th training snapshot for ECSW.
+        #[arg(long, default_value_t = 10)]
+        every: usize,
+        /// Output folder for ecsw.npy and rom.json (default: the basis folder).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print a JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Sweeps basis size and ECSW tolerance; writes TCP RMSE (mm) against speed-up per step, both
+    /// against the full FEM on the held-out sequences, as CSV and PNG/SVG.
+    Curve {
+        #[command(flatten)]
+        mesh: MeshArgs,
+        /// Snapshot folder.
+        #[arg(long)]
+        snapshots: PathBuf,
+        /// Basis sizes.
+        #[arg(long, value_delimiter = ',', default_value = "4,8,16,32")]
+        ranks: Vec<usize>,
+        /// ECSW tolerances (0 = plain Galerkin, every element).
+        #[arg(long, value_delimiter = ',', default_value = "1e-2,1e-3")]
+        tolerances: Vec<f64>,
+        /// Use every k-th training snapshot for ECSW.
+        #[arg(long, default_value_t = 10)]
+        every: usize,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Print a JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Writes (time, P_S, tip force, X_S, dX_S/dt) sequences as NPY shards with a JSON manifest.
+    /// Rerunning skips finished shards; the shards of a job array stack to the unsharded run.
+    Dataset {
+        #[command(flatten)]
+        mesh: MeshArgs,
+        /// Which model simulates.
+        #[arg(long, value_enum)]
+        model: ModelArg,
+        /// Reduced-model folder (basis.npy, pod.json, ecsw.npy, rom.json) for --model reduced.
+        #[arg(long, required_if_eq("model", "reduced"))]
+        rom: Option<PathBuf>,
+        /// Rows (time steps of 0.01 s) in the whole dataset.
+        #[arg(long)]
+        samples: usize,
+        /// Steps per sequence, each from rest.
+        #[arg(long, default_value_t = 500)]
+        sequence_steps: usize,
+        /// This run's shard as I/N (0-based); default 0/1.
+        #[arg(long, default_value = "0/1")]
+        shard: String,
+        /// Seed of the inputs.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Print a JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Where the bellows mesh comes from.
+#[derive(clap::Args, Debug, Clone)]
+pub struct MeshArgs {
+    /// Data directory (default: OCM_DATA_DIR, else ../shared/data).
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Bellows mesh (VTK, mm); default: the data directory's ManipulatorWhole25.vtk.
+    #[arg(long)]
+    mesh: Option<PathBuf>,
+}
+
+impl MeshArgs {
+    fn load(&self) -> anyhow::Result<Bellows> {
+        let p = data_path(self.mesh.clone(), self.data.as_deref(), BELLOWS_MESH)?;
+        Ok(Bellows::load(&p, BellowsConfig::default())?)
+    }
+}
+
+/// Model kinds on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum ModelArg {
+    /// The full FEM.
+    Full,
+    /// The hyper-reduced model.
+    Reduced,
+}
+
+/// What `ocm mor snapshots` stored.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct SnapshotRecord {
+    model_hash: String,
+    seed: u64,
+    sequences: usize,
+    held_out: usize,
+    steps: usize,
+    dt_s: f64,
+    dofs: usize,
+    /// Full-model wall time per step, s (all sequences).
+    seconds_per_step: f64,
+}
+
+fn bar(n: usize, what: &str) -> ProgressBar {
+    let b = ProgressBar::new(n as u64);
+    if let Ok(style) =
+        ProgressStyle::with_template("{msg} {bar:40} {pos}/{len} [{elapsed_precise} < {eta}]")
+    {
+        b.set_style(style);
+    }
+    b.set_message(what.to_string());
+    b
+}
+
+struct Snapshots {
+    rec: SnapshotRecord,
+    /// Rows = snapshots (M x 3N).
+    disp: npy::Array2,
+    xs: npy::Array2,
+}
+
+fn load_snapshots(dir: &Path, model_hash: &str) -> anyhow::Result<Snapshots> {
+    let jp = dir.join("snapshots.json");
+    let rec: SnapshotRecord = serde_json::from_str(
+        &std::fs::read_to_string(&jp).with_context(|| format!("reading {}", jp.display()))?,
+    )
+    .with_context(|| format!("{}: not a snapshot record", jp.display()))?;
+    if rec.model_hash != model_hash {
+        bail!(
+            "{}: snapshots of model {}, not of this model {model_hash}",
+            jp.display(),
+            rec.model_hash
+        );
+    }
+    let disp = npy::read_f64_2d(dir.join("displacements.npy"))?;
+    let xs = npy::read_f64_2d(dir.join("xs.npy"))?;
+    let m = (rec.sequences + rec.held_out) * rec.steps;
+    if (disp.rows, disp.cols) != (m, rec.dofs) {
+        bail!(
+            "{}: shape ({}, {}) but snapshots.json implies ({m}, {})",
+            dir.join("displacements.npy").display(),
+            disp.rows,
+            disp.cols,
+            rec.dofs
+        );
+    }
+    if (xs.rows, xs.cols) != (m, 2 * XS_DIM) {
+        bail!(
+            "{}: shape ({}, {}) but expected ({m}, {})",
+            dir.join("xs.npy").display(),
+            xs.rows,
+            xs.cols,
+            2 * XS_DIM
+        );
+    }
+    Ok(Snapshots { rec, disp, xs })
+}
+
+impl Snapshots {
+    fn train_rows(&self) -> usize {
+        self.rec.sequences * self.rec.steps
+    }
+    /// Column-major 3N x k faer matrix of rows a..b.
+    fn matrix(&self, a: usize, b: usize) -> faer::Mat<f64> {
+        let n = self.disp.cols;
+        faer::Mat::<f64>::from_fn(n, b - a, |i, j| self.disp.data[(a + j) * n + i])
+    }
+    fn xs_row(&self, k: usize) -> [f64; 2 * XS_DIM] {
+        let mut o = [0.0; 2 * XS_DIM];
+        o.copy_from_slice(&self.xs.data[k * 2 * XS_DIM..(k + 1) * 2 * XS_DIM]);
+        o
+    }
+    /// Held-out sequences: (sequence index, inputs, full X_S rows).
+    fn held_out(&self) -> Vec<(usize, Vec<drive::Input>, Vec<[f64; 2 * XS_DIM]>)> {
+        let r = &self.rec;
+        (r.sequences..r.sequences + r.held_out)
+            .map(|k| {
+                let inputs = drive::sequence(&DriveConfig::default(), r.seed, k as u64, r.steps);
+                let xs = (0..r.steps).map(|j| self.xs_row(k * r.steps + j)).collect();
+                (k, inputs, xs)
+            })
+            .collect()
+    }
+}
+
+fn peak_rss_gib() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / (1024.0 * 1024.0))
+}
+
+fn galerkin(b: &Bellows, basis: DMatrix<f64>) -> anyhow::Result<ReducedModel> {
+    Ok(ReducedModel::galerkin(&b.model, basis, &b.top_face)?)
+}
+
+fn training_q(s: &Snapshots, basis: &DMatrix<f64>, every: usize) -> Vec<DVector<f64>> {
+    let n = s.disp.cols;
+    (0..s.train_rows())
+        .step_by(every.max(1))
+        .map(|k| basis.transpose() * DVector::from_column_slice(&s.disp.data[k * n..(k + 1) * n]))
+        .collect()
+}
+
+/// Scores a reduced model on the held-out sequences: (TCP RMSE mm, seconds per step).
+fn score(b: &Bellows, rom: &ReducedModel, s: &Snapshots) -> anyhow::Result<(f64, f64)> {
+    let probe = ReducedProbe::new(XsProbe::of_bellows(b), rom);
+    let (mut sq, mut n, mut secs) = (0.0, 0usize, 0.0);
+    for (_, inputs, xs_full) in s.held_out() {
+        let (xs, t) = run::simulate_reduced(rom, &probe, &inputs, s.rec.dt_s)?;
+        let e = run::tcp_rmse_mm(&xs, &xs_full)?;
+        sq += e * e * xs.len() as f64;
+        n += xs.len();
+        secs += t;
+    }
+    if n == 0 {
+        bail!("no held-out sequences in the snapshot folder (use --held-out)");
+    }
+    Ok(((sq / n as f64).sqrt(), secs / n as f64))
+}
+
+fn basis_from_pod(p: &ocm_mor::pod::Pod) -> DMatrix<f64> {
+    DMatrix::from_fn(p.modes.nrows(), p.modes.ncols(), |i, j| p.modes[(i, j)])
+}
+
+/// Runs an `ocm mor` subcommand.
+pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
+    match cmd {
+        MorCommand::Snapshots {
+            mesh,
+            sequences,
+            held_out,
+            steps,
+            seed,
+            out,
+            json,
+        } => {
+            let b = mesh.load()?;
+            let cfg = DriveConfig::default();
+            let total = sequences + held_out;
+            let pb = bar(total * steps, "full FEM steps");
+            let (mut disp, mut xs, mut secs) = (vec![], vec![], 0.0);
+            for k in 0..total {
+                let inputs = drive::sequence(&cfg, seed, k as u64, steps);
+                let tr = full::simulate(&b, &inputs, cfg.dt_s, true, |j| {
+                    pb.set_position((k * steps + j + 1) as u64)
+                })?;
+                secs += tr.seconds;
+                disp.extend(tr.displacements.into_iter().flatten());
+                xs.extend(tr.xs.iter().flatten().copied());
+            }
+            pb.finish_and_clear();
+            std::fs::create_dir_all(&out)?;
+            let dofs = 3 * b.model.num_nodes();
+            npy::write_f64_2d_path(out.join("displacements.npy"), &disp, total * steps, dofs)?;
+            npy::write_f64_2d_path(out.join("xs.npy"), &xs, total * steps, 2 * XS_DIM)?;
+            let rec = SnapshotRecord {
+                model_hash: store::model_hash(&b),
+                seed,
+                sequences,
+                held_out,
+                steps,
+                dt_s: cfg.dt_s,
+                dofs,
+                seconds_per_step: secs / (total * steps) as f64,
+            };
+            std::fs::write(
+                out.join("snapshots.json"),
+                serde_json::to_string_pretty(&rec)?,
+            )?;
+            if json {
+                println!("{}", serde_json::to_string(&rec)?);
+            } else {
+                println!(
+                    "{} snapshots of {dofs} DOFs ({sequences} training + {held_out} held-out sequences of {steps} steps), full FEM {:.1} ms/step -> {}",
+                    total * steps,
+                    rec.seconds_per_step * 1e3,
+                    out.display()
+                );
+            }
+            Ok(())
+        }
+        MorCommand::Pod {
+            mesh,
+            snapshots,
+            rank,
+            energy,
+            max_rank,
+            oversampling,
+            power_iterations,
+            out,
+            bench,
+            rows,
+            cols,
+            json,
+        } => {
+            let truncation = match rank {
+                Some(r) => Truncation::Rank(r),
+                None if bench => Truncation::Rank(1223),
+                None => Truncation::Energy {
+                    fraction: energy,
+                    max_rank,
+                },
+            };
+            let opts = PodOptions {
+                truncation,
+                oversampling,
+                power_iterations,
+                seed: 1,
+            };
+            if bench {
+                let a = ocm_mor::pod::gaussian_matrix(rows, cols, 7);
+                let t0 = std::time::Instant::now();
+                let p = ocm_mor::pod::pod(a.as_ref(), &opts)?;
+                let secs = t0.elapsed().as_secs_f64();
+                let summary = serde_json::json!({
+                    "rows": rows, "cols": cols, "rank": p.rank(), "oversampling": oversampling,
+                    "power_iterations": power_iterations, "seconds": secs,
+                    "peak_rss_gib": peak_rss_gib(), "threads": rayon_threads(),
+                });
+                if json {
+                    println!("{summary}");
+                } else {
+                    println!(
+                        "randomized SVD of a {rows} x {cols} matrix to rank {}: {secs:.1} s, peak memory {:.2} GiB",
+                        p.rank(),
+                        peak_rss_gib().unwrap_or(f64::NAN)
+                    );
+                }
+                return Ok(());
+            }
+            let (Some(sdir), Some(out)) = (snapshots, out) else {
+                bail!("--snapshots and --out are required without --bench");
+            };
+            let b = mesh.load()?;
+            let hash = store::model_hash(&b);
+            let s = load_snapshots(&sdir, &hash)?;
+            let train = s.matrix(0, s.train_rows());
+            let t0 = std::time::Instant::now();
+            let p = ocm_mor::pod::pod(train.as_ref(), &opts)?;
+            let secs = t0.elapsed().as_secs_f64();
+            drop(train);
+            let held = s.matrix(s.train_rows(), s.disp.rows);
+            let held_err = if held.ncols() > 0 {
+                p.projection_error(held.as_ref())
+            } else {
+                f64::NAN
+            };
+            let basis = basis_from_pod(&p);
+            let rec = PodRecord {
+                model_hash: hash,
+                basis_hash: store::basis_hash(&basis),
+                dofs: basis.nrows(),
+                rank: p.rank(),
+                snapshots: s.train_rows(),
+                singular_values: p.singular_values.clone(),
+                captured_energy: p.captured_energy(),
+                held_out_projection_error: held_err,
+                seconds: secs,
+            };
+            store::save_basis(&out, &basis, &rec)?;
+            if json {
+                println!("{}", serde_json::to_string(&rec)?);
+            } else {
+                let sv: Vec<String> = p
+                    .singular_values
+                    .iter()
+                    .take(8)
+                    .map(|v| format!("{v:.3e}"))
+                    .collect();
+                println!(
+                    "rank {} of {} snapshots in {secs:.2} s: captured energy {:.6}, held-out projection error {:.3e}; sigma = {} ... -> {}",
+                    rec.rank,
+                    rec.snapshots,
+                    rec.captured_energy,
+                    held_err,
+                    sv.join(", "),
+                    out.display()
+                );
+            }
+            Ok(())
+        }
+        MorCommand::Reduce {
+            mesh,
+            snapshots,
+            basis,
+            tolerance,
+            every,
+            out,
+            json,
+        } => {
+            let b = mesh.load()?;
+            let hash = store::model_hash(&b);
+            let s = load_snapshots(&snapshots, &hash)?;
+            let (v, _) = store::load_basis(&basis, &hash, 3 * b.model.num_nodes())?;
+            let gal = galerkin(&b, v.clone())?;
+            let t0 = std::time::Instant::now();
+            let ecsw = gal.hyper_reduce(&training_q(&s, &v, every), tolerance)?;
+            let train_secs = t0.elapsed().as_secs_f64();
+            let rec = RomRecord {
+                basis_hash: store::basis_hash(&v),
+                rom_hash: store::rom_hash(&ecsw.model),
+                rank: v.ncols(),
+                ecsw_tolerance: tolerance,
+                elements: ecsw.model.elements.len(),
+                full_elements: gal.elements.len(),
+                relative_residual: ecsw.relative_residual,
+            };
+            let out = out.unwrap_or(basis);
+            store::save_rom(&out, &ecsw.model, &rec)?;
+            let (err, sps) = score(&b, &ecsw.model, &s)?;
+            let speedup = s.rec.seconds_per_step / sps;
+            if json {
+                println!(
+                    "{}",
+                    serde_json::json!({ "rom": rec, "ecsw_seconds": train_secs, "held_out_tcp_rmse_mm": err,
+                        "reduced_seconds_per_step": sps, "full_seconds_per_step": s.rec.seconds_per_step, "speedup": speedup })
+                );
+            } else {
+                println!(
+                    "rank {}, ECSW keeps {} of {} elements (training residual {:.2e}, {train_secs:.1} s); held-out TCP RMSE {err:.3} mm, {:.3} ms/step vs full {:.1} ms/step: {speedup:.0}x -> {}",
+                    rec.rank,
+                    rec.elements,
+                    rec.full_elements,
+                    rec.relative_residual,
+                    sps * 1e3,
+                    s.rec.seconds_per_step * 1e3,
+                    out.display()
+                );
+            }
+            Ok(())
+        }
+        MorCommand::Curve {
+            mesh,
+            snapshots,
+            ranks,
+            tolerances,
+            every,
+            out,
+            json,
+        } => {
+            let b = mesh.load()?;
+            let hash = store::model_hash(&b);
+            let s = load_snapshots(&snapshots, &hash)?;
+            std::fs::create_dir_all(&out)?;
+            let train = s.matrix(0, s.train_rows());
+            let maxr = ranks.iter().copied().max().unwrap_or(1);
+            let p = ocm_mor::pod::pod(
+                train.as_ref(),
+                &PodOptions {
+                    truncation: Truncation::Rank(maxr),
+                    ..PodOptions::default()
+                },
+            )?;
+            drop(train);
+            let full_basis = basis_from_pod(&p);
+            let pb = bar(ranks.len() * tolerances.len(), "rank x tolerance");
+            let mut rows = vec![];
+            let mut csv = String::from(
+                "rank,ecsw_tolerance,elements,tcp_rmse_mm,reduced_ms_per_step,full_ms_per_step,speedup\n",
+            );
+            for &r in &ranks {
+                let v = full_basis.columns(0, r).into_owned();
+                let gal = galerkin(&b, v.clone())?;
+                let tq = training_q(&s, &v, every);
+                for &tol in &tolerances {
+                    let rom = if tol > 0.0 {
+                        gal.hyper_reduce(&tq, tol)?.model
+                    } else {
+                        gal.clone()
+                    };
+                    let (err, sps) = match score(&b, &rom, &s) {
+                        Ok(x) => x,
+                        Err(e) => {
+                            eprintln!("rank {r}, tolerance {tol}: {e}");
+                            (f64::NAN, f64::NAN)
+                        }
+                    };
+                    let speedup = s.rec.seconds_per_step / sps;
+                    csv.push_str(&format!(
+                        "{r},{tol:e},{},{err:.6},{:.6},{:.6},{speedup:.3}\n",
+                        rom.elements.len(),
+                        sps * 1e3,
+                        s.rec.seconds_per_step * 1e3
+                    ));
+                    rows.push(serde_json::json!({ "rank": r, "ecsw_tolerance": tol, "elements": rom.elements.len(),
+                        "tcp_rmse_mm": err, "speedup": speedup, "reduced_ms_per_step": sps * 1e3 }));
+                    pb.inc(1);
+                }
+            }
+            pb.finish_and_clear();
+            std::fs::write(out.join("curve.csv"), &csv)?;
+            let series = tolerances
+                .iter()
+                .map(|&tol| Series {
+                    label: if tol > 0.0 {
+                        format!("ECSW tolerance {tol:e}")
+                    } else {
+                        "Galerkin (all elements)".into()
+                    },
+                    points: rows
+                        .iter()
+                        .filter(|r| r["ecsw_tolerance"].as_f64() == Some(tol))
+                        .filter_map(|r| Some((r["speedup"].as_f64()?, r["tcp_rmse_mm"].as_f64()?)))
+                        .filter(|(x, y)| x.is_finite() && y.is_finite())
+                        .collect(),
+                    dots: false,
+                })
+                .collect();
+            Chart {
+                title: "Reduced bellows model: held-out TCP error against speed-up per step",
+                x_label: "speed-up per time step vs full FEM (x)",
+                y_label: "TCP RMSE (mm)",
+                series,
+                equal_axes: false,
+            }
+            .write(&out, "curve")?;
+            if json {
+                println!(
+                    "{}",
+                    serde_json::json!({ "points": rows, "csv": out.join("curve.csv") })
+                );
+            } else {
+                print!("{csv}");
+                println!("-> {}", out.display());
+            }
+            Ok(())
+        }
+        MorCommand::Dataset {
+            mesh,
+            model,
+            rom,
+            samples,
+            sequence_steps,
+            shard,
+            seed,
+            out,
+            json,
+        } => {
+            let (i, n) = parse_shard(&shard)?;
+            let b = mesh.load()?;
+            let hash = store::model_hash(&b);
+            let drive_cfg = DriveConfig::default();
+            let probe = XsProbe::of_bellows(&b);
+            let pb = bar(0, "dataset steps");
+            let mut progress = |done: usize, total: usize| {
+                pb.set_length(total as u64);
+                pb.set_position(done as u64);
+            };
+            let outcome = match model {
+                ModelArg::Full => {
+                    let spec = DatasetSpec {
+                        model: ModelKind::Full,
+                        model_hash: hash,
+                        basis_hash: None,
+                        samples,
+                        sequence_steps,
+                        seed,
+                        drive: drive_cfg,
+                    };
+                    dataset::write_shard(
+                        &out,
+                        &spec,
+                        i,
+                        n,
+                        &mut |inputs| {
+                            Ok(full::simulate(&b, inputs, drive_cfg.dt_s, false, |_| {})?.xs)
+                        },
+                        &mut progress,
+                    )?
+                }
+                ModelArg::Reduced => {
+                    let dir = rom.context("--rom DIR is required for --model reduced")?;
+                    let (v, _) = store::load_basis(&dir, &hash, 3 * b.model.num_nodes())?;
+                    let gal = galerkin(&b, v)?;
+                    let (r, _) = store::load_rom(&dir, &gal)?;
+                    let rp = ReducedProbe::new(probe, &r);
+                    let spec = DatasetSpec {
+                        model: ModelKind::Reduced,
+                        model_hash: hash,
+                        basis_hash: Some(store::rom_hash(&r)),
+                        samples,
+                        sequence_steps,
+                        seed,
+                        drive: drive_cfg,
+                    };
+                    dataset::write_shard(
+                        &out,
+                        &spec,
+                        i,
+                        n,
+                        &mut |inputs| Ok(run::simulate_reduced(&r, &rp, inputs, drive_cfg.dt_s)?.0),
+                        &mut progress,
+                    )?
+                }
+            };
+            pb.finish_and_clear();
+            if json {
+                println!("{}", serde_json::to_string(&outcome)?);
+            } else if outcome.skipped {
+                println!(
+                    "shard {i}/{n} already complete in {}: skipped",
+                    outcome.dir.display()
+                );
+            } else {
+                println!(
+                    "shard {i}/{n}: {} rows (sequences {}..{}) in {:.1} s -> {}",
+                    outcome.record.rows,
+                    outcome.record.first_sequence,
+                    outcome.record.end_sequence,
+                    outcome.record.seconds,
+                    outcome.dir.display()
+                );
+            }
+            Ok(())
+        }
+    }
+}
+
+fn rayon_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+fn parse_shard(s: &str) -> anyhow::Result<(usize, usize)> {
+    let (a, b) = s
+        .split_once('/')
+        .with_context(|| format!("--shard '{s}' must be I/N, e.g. 0/4"))?;
+    let (i, n): (usize, usize) = (a.trim().parse()?, b.trim().parse()?);
+    if n == 0 || i >= n {
+        bail!("--shard {i}/{n}: I must be below N");
+    }
+    Ok((i, n))
+}
