@@ -47,8 +47,9 @@ fn circle_summary_orders_the_controllers_and_is_deterministic() {
         a["oracle_rmse_mm"].as_f64().unwrap(),
     );
     assert!(cl < 0.5 * ol, "closed loop {cl} mm vs open loop {ol} mm");
+    // The lab's bound (hil-sim/tests/firmware.rs): the oracle reads the hysteresis state.
     assert!(
-        cl <= 1.5 * oracle,
+        cl <= 2.5 * oracle && cl <= 1.0,
         "closed loop {cl} mm vs oracle {oracle} mm"
     );
     assert!(a["realtime_factor"].as_f64().unwrap() > 0.0);
