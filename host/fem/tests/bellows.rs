@@ -6,17 +6,7 @@ use ocm_fem::solve::statics::StaticSolver;
 use std::path::PathBuf;
 
 fn mesh_path() -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data/bellows-manipulator/ManipulatorWhole25.vtk");
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!(
-            "SKIP: {} not found (shared data folder absent)",
-            p.display()
-        );
-        None
-    }
+    ocm_datadir::test_data("bellows-manipulator/ManipulatorWhole25.vtk")
 }
 
 #[test]

@@ -4,18 +4,7 @@ use ocm_fem::mesh::{stl, surface, vtk};
 use std::path::PathBuf;
 
 fn data(rel: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data")
-        .join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!(
-            "SKIP: {} not found (shared data folder absent)",
-            p.display()
-        );
-        None
-    }
+    ocm_datadir::test_data(rel)
 }
 
 #[test]
