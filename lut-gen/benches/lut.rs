@@ -8,7 +8,7 @@ use ocm_shared::lut::{ForceN, LengthM, LutImage, MomentNm, PressurePa};
 use std::hint::black_box;
 
 fn bench(c: &mut Criterion) {
-    let model = OcmModel::new(OcmParams::default()).expect("defaults are valid");
+    let model = OcmModel::new(OcmParams::TABLE_3_1).expect("defaults are valid");
     let cfg = TableConfig::default();
     c.bench_function("build_default_lut", |b| {
         b.iter(|| {

@@ -14,6 +14,7 @@ pub mod model;
 pub mod pcc;
 pub mod scalar;
 pub mod stack;
+pub mod surface;
 pub mod tables;
 
 pub use model::{AxialTerms, BendConfig, BendingTerms, ModelError, OcmModel};

@@ -259,6 +259,17 @@ impl OcmModel {
         self.params.layers as f64 * h / r2
     }
 
+    /// Largest feasible bend angle at `strain0` and its derivative with
+    /// respect to the strain (radians, radians per unit strain).
+    pub fn max_bend_angle_and_slope(&self, strain0: f64) -> (f64, f64) {
+        let n = f64::from(self.params().layers);
+        let h = Dual64::from_re(self.layer_height_m(strain0)).derivative();
+        let r2 = self.layer().geometry.middle_radius(h);
+        let phi = h * n / r2;
+        // dh/dstrain = l0 / N
+        (phi.re, phi.eps * self.params().rest_length_m / n)
+    }
+
     /// Bending moment terms at bending angle `phi` and initial strain `strain0`.
     ///
     /// `Pi = N * Pi_layer(beta)` with `phi = N beta`, so `dPi/dphi = dPi_layer/dbeta`.

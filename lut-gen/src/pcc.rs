@@ -100,6 +100,22 @@ impl Config {
         ]
     }
 
+    /// Plate orientation as a rotation matrix (rows), the same turn as
+    /// [`Self::quaternion`]: `R = I + sin(theta) [k]x + (1 - cos(theta)) [k]x^2`
+    /// with `k = (-sin phi, cos phi, 0)`.
+    pub fn rotation(&self) -> [[f64; 3]; 3] {
+        let th = self.bend_rad();
+        // sin(th)/th and (cos(th) - 1)/th^2, smooth through the straight pose.
+        let s1 = sinc(th);
+        let c1 = -0.5 * sinc(0.5 * th).powi(2);
+        let (bx, by) = (self.bend_x_rad, self.bend_y_rad);
+        [
+            [1.0 + bx * bx * c1, bx * by * c1, bx * s1],
+            [bx * by * c1, 1.0 + by * by * c1, by * s1],
+            [-bx * s1, -by * s1, 1.0 + th * th * c1],
+        ]
+    }
+
     /// The configuration whose plate centre is at `p` (single segment): the
     /// arc through the origin, tangent to z there, ending at `p`.
     pub fn from_position(p: [f64; 3]) -> Option<Self> {
@@ -169,6 +185,52 @@ mod tests {
         // lengths -> configuration -> lengths is the identity
         let l = c.column_lengths(d);
         assert!((l[2] - 0.13).abs() < 1e-15 && (l[0] - 0.12).abs() < 1e-15);
+    }
+
+    /// The rotation matrix is the quaternion's turn, straight pose included.
+    #[test]
+    fn rotation_matrix_is_the_quaternion() {
+        for c in [
+            Config::from_polar(0.12, 0.7, 2.1),
+            Config::from_polar(0.1, 1e-9, -0.4),
+            Config::from_polar(0.1, 0.0, 0.0),
+        ] {
+            let [w, x, y, z] = c.quaternion();
+            let q = [
+                [
+                    1.0 - 2.0 * (y * y + z * z),
+                    2.0 * (x * y - w * z),
+                    2.0 * (x * z + w * y),
+                ],
+                [
+                    2.0 * (x * y + w * z),
+                    1.0 - 2.0 * (x * x + z * z),
+                    2.0 * (y * z - w * x),
+                ],
+                [
+                    2.0 * (x * z - w * y),
+                    2.0 * (y * z + w * x),
+                    1.0 - 2.0 * (x * x + y * y),
+                ],
+            ];
+            let r = c.rotation();
+            for i in 0..3 {
+                for j in 0..3 {
+                    assert!((r[i][j] - q[i][j]).abs() < 1e-14, "{c:?} {r:?} {q:?}");
+                }
+            }
+        }
+        // the plate normal is the arc's tangent at the tip
+        let c = Config::from_polar(0.12, 0.7, 2.1);
+        let r = c.rotation();
+        let t = [
+            0.7f64.sin() * 2.1f64.cos(),
+            0.7f64.sin() * 2.1f64.sin(),
+            0.7f64.cos(),
+        ];
+        for i in 0..3 {
+            assert!((r[i][2] - t[i]).abs() < 1e-14);
+        }
     }
 
     #[test]

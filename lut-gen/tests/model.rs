@@ -8,7 +8,7 @@ use ocm_lutgen::geometry::{
 use ocm_lutgen::{ModelError, OcmModel, OcmParams};
 
 fn model() -> OcmModel {
-    OcmModel::new(OcmParams::default()).expect("Table 3.1 parameters are valid")
+    OcmModel::new(OcmParams::TABLE_3_1).expect("Table 3.1 parameters are valid")
 }
 
 fn strains() -> Vec<f64> {
@@ -398,7 +398,7 @@ fn invalid_parameters_are_named() {
     // 100 mm layers cannot be folded from 30 mm creases.
     let p = OcmParams {
         rest_length_m: 1.0,
-        ..OcmParams::default()
+        ..OcmParams::TABLE_3_1
     };
     match OcmModel::new(p) {
         Err(ModelError::InvalidParameter { name, .. }) => assert_eq!(name, "rest_length_m"),
@@ -406,7 +406,7 @@ fn invalid_parameters_are_named() {
     }
     let p = OcmParams {
         bar_stiffness_n_per_m: f64::NAN,
-        ..OcmParams::default()
+        ..OcmParams::TABLE_3_1
     };
     assert!(matches!(
         OcmModel::new(p),
@@ -417,7 +417,7 @@ fn invalid_parameters_are_named() {
     ));
     let p = OcmParams {
         layers: 0,
-        ..OcmParams::default()
+        ..OcmParams::TABLE_3_1
     };
     assert!(OcmModel::new(p).is_err());
 }

@@ -9,7 +9,7 @@ use ocm_lutgen::{OcmModel, OcmParams};
 
 /// The Table 3.1 OCM with `layers` layers of the standard layer height.
 fn model(layers: u32) -> OcmModel {
-    let mut p = OcmParams::default();
+    let mut p = OcmParams::TABLE_3_1;
     p.rest_length_m = p.rest_length_m / p.layers as f64 * layers as f64;
     p.layers = layers;
     OcmModel::new(p).expect("Table 3.1 parameters are valid")

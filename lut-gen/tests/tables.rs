@@ -45,7 +45,7 @@ fn default_image_meets_budget_and_accuracy() {
 fn coarse_tables_are_measurably_worse() {
     // The accuracy check must be able to fail: a 9-point strain grid
     // and 3 length levels cannot meet the goals.
-    let model = OcmModel::new(OcmParams::default()).unwrap();
+    let model = OcmModel::new(OcmParams::TABLE_3_1).unwrap();
     let cfg = TableConfig {
         n_eps: 5,
         n_s: 2,
@@ -65,7 +65,7 @@ fn coarse_tables_are_measurably_worse() {
 
 #[test]
 fn image_round_trips_the_sampled_forward_values() {
-    let model = OcmModel::new(OcmParams::default()).unwrap();
+    let model = OcmModel::new(OcmParams::TABLE_3_1).unwrap();
     let cfg = TableConfig::default();
     let tables = build_tables(&model, &cfg, &|_, _| {}).unwrap();
     let bytes = tables.encode(&model).unwrap();
@@ -136,7 +136,7 @@ fn corrupt_images_are_rejected_each_with_its_own_error() {
 
 #[test]
 fn invalid_grids_are_named() {
-    let model = OcmModel::new(OcmParams::default()).unwrap();
+    let model = OcmModel::new(OcmParams::TABLE_3_1).unwrap();
     for cfg in [
         TableConfig {
             n_eps: 1,
@@ -165,7 +165,7 @@ fn image_for_other_parameters_is_refused_by_the_check() {
     let (_, bytes) = default_image();
     let other = OcmModel::new(OcmParams {
         hinge_stiffness_n_per_m: 0.2,
-        ..OcmParams::default()
+        ..OcmParams::TABLE_3_1
     })
     .unwrap();
     let err = check_accuracy(&other, &bytes, 10).unwrap_err();

@@ -1,9 +1,10 @@
 //! Design parameters of a Yoshimura origami cylinder module (OCM) and of the
 //! manipulator built from them.
 //!
-//! `Default` follows Table 3.1 of the dissertation (Ch. 3.3.1); the lab and
-//! the LUT default to [`ParamPreset::Calibrated`] instead (see
-//! `docs/model.md`, "Calibrated parameters"). All values are SI: metres,
+//! There is one default everywhere: [`ParamPreset::Calibrated`] (Table 3.1's
+//! geometry with its stiffnesses scaled so that 0-30 kPa spans the strain
+//! range, see `docs/model.md`, "Calibrated parameters"). Table 3.1 as printed
+//! is [`OcmParams::TABLE_3_1`], chosen by name. All values are SI: metres,
 //! radians, kilograms, newtons per metre.
 
 use serde::{Deserialize, Serialize};
@@ -78,9 +79,11 @@ impl OcmParams {
     }
 }
 
+/// The default preset's parameters: the one default of the LUT, the lab,
+/// the firmware's boot geometry and every configuration file.
 impl Default for OcmParams {
     fn default() -> Self {
-        Self::TABLE_3_1
+        ParamPreset::default().ocm()
     }
 }
 
@@ -213,6 +216,12 @@ mod tests {
             ..c
         };
         assert_eq!(geometry, t);
+    }
+
+    #[test]
+    fn the_default_is_the_default_preset() {
+        assert_eq!(OcmParams::default(), OcmParams::CALIBRATED);
+        assert_eq!(OcmParams::default(), ParamPreset::default().ocm());
     }
 
     #[test]

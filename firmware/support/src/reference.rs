@@ -1,18 +1,16 @@
 //! `f64` reference twin of `ocm_firmware::kinematics`: the same equations in
 //! floating point and SI units, the yardstick of the fixed-point path.
 //!
-//! The piecewise-constant-curvature arc-to-tip map lives in one function,
-//! [`segment_pose`]; everything else (forces, strains, column lengths,
-//! eq 3.26) is the firmware's own model.
+//! The piecewise-constant-curvature geometry (column lengths, eq 3.26, and
+//! the arc-to-tip map) is the host's one `f64` PCC map, `ocm_lutgen::pcc`;
+//! everything else (forces, strains, bending) is the firmware's own model.
 
+use ocm_lutgen::pcc::{self, COS_BETA as BETA_COS, SIN_BETA as BETA_SIN};
 use ocm_shared::protocol::{Geometry, Load, MAX_SEGMENTS, Mount};
 
 use ocm_firmware::kinematics::GRAVITY;
 
 use crate::maps_f64::OcmMapsF64;
-
-const BETA_COS: [f64; 3] = [1.0, -0.5, -0.5];
-const BETA_SIN: [f64; 3] = [0.0, 0.866_025_403_784_438_6, -0.866_025_403_784_438_6];
 
 /// Manipulator description in SI units.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -133,24 +131,27 @@ pub fn column_lengths<M: OcmMapsF64>(
 
 /// PCC configuration from column lengths (eq 3.26).
 pub fn pcc_from_lengths(model: &ModelF64, l: [f64; 3]) -> ConfigF64 {
-    let s = (l[0] + l[1] + l[2]) / 3.0;
-    let a = (l[1] + l[2] - 2.0 * l[0]) / 3.0;
-    let b = (l[2] - l[1]) / libm::sqrt(3.0);
-    let r = libm::hypot(a, b);
+    let c = pcc::Config::from_column_lengths(l, model.d_m);
+    let bend_rad = c.bend_rad();
     ConfigF64 {
-        backbone_m: s,
-        bend_rad: r / model.d_m,
-        direction_rad: if r == 0.0 { 0.0 } else { libm::atan2(b, a) },
+        backbone_m: c.backbone_m,
+        bend_rad,
+        direction_rad: if bend_rad == 0.0 {
+            0.0
+        } else {
+            c.bend_y_rad.atan2(c.bend_x_rad)
+        },
     }
 }
 
 /// Column lengths of a configuration (inverse of eq 3.26), m.
 pub fn lengths_from_pcc(model: &ModelF64, c: &ConfigF64) -> [f64; 3] {
-    core::array::from_fn(|i| {
-        let cos_diff =
-            BETA_COS[i] * libm::cos(c.direction_rad) + BETA_SIN[i] * libm::sin(c.direction_rad);
-        c.backbone_m - model.d_m * c.bend_rad * cos_diff
-    })
+    polar(c).column_lengths(model.d_m)
+}
+
+/// The PCC map's configuration of a polar one.
+fn polar(c: &ConfigF64) -> pcc::Config {
+    pcc::Config::from_polar(c.backbone_m, c.bend_rad, c.direction_rad)
 }
 
 /// Rigid transform in SI.
@@ -184,30 +185,11 @@ impl PoseF64 {
 
 /// Top-plate pose of one segment under PCC: the arc of length `backbone_m`
 /// bent by `bend_rad` towards `direction_rad`, base frame to tip frame.
-///
-/// The only place the twin evaluates the arc-to-tip map; the host's single
-/// `f64` PCC map can take its place without touching the rest.
 pub fn segment_pose(c: &ConfigF64) -> PoseF64 {
-    fn sinc(x: f64) -> f64 {
-        if libm::fabs(x) < 1e-6 {
-            1.0 - x * x / 6.0
-        } else {
-            libm::sin(x) / x
-        }
-    }
-    let (st, ct) = (libm::sin(c.bend_rad), libm::cos(c.bend_rad));
-    let (sp, cp) = (libm::sin(c.direction_rad), libm::cos(c.direction_rad));
-    let half = c.bend_rad / 2.0;
-    let r = c.backbone_m * libm::sin(half) * sinc(half);
-    let z = c.backbone_m * sinc(c.bend_rad);
-    let cm1 = ct - 1.0;
+    let q = polar(c);
     PoseF64 {
-        r: [
-            [1.0 + cp * cp * cm1, cp * sp * cm1, cp * st],
-            [cp * sp * cm1, 1.0 + sp * sp * cm1, sp * st],
-            [-cp * st, -sp * st, ct],
-        ],
-        p: [r * cp, r * sp, z],
+        r: q.rotation(),
+        p: q.position(),
     }
 }
 

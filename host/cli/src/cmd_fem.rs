@@ -159,11 +159,12 @@ pub enum CalibrateCommand {
 /// Law names on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum LawArg {
-    /// Corotational linear elasticity.
+    /// Linear elasticity in a frame that turns with each element: small strains, large rotations.
     Corotational,
-    /// Neo-Hookean eq 2.1.
+    /// Compressible Neo-Hookean with a logarithmic volume term, for large strains (eq 2.1).
     NeoHookean,
-    /// Neo-Hookean eq 5.6.
+    /// Neo-Hookean with a separate bulk term on the volume change, for nearly
+    /// incompressible gels such as the DIGIT's (eq 5.6).
     NeoHookeanBulk,
 }
 

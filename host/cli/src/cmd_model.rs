@@ -10,14 +10,16 @@ use ocm_lutgen::stack::{AssumptionConfig, AssumptionReport, measure_assumptions}
 /// Model subcommands.
 #[derive(clap::Subcommand, Debug)]
 pub enum ModelCommand {
-    /// Add `force_n` (eq 3.9) to a CSV with columns `time_s,pressure_kpa,strain`.
+    /// Add the axial force one OCM exerts at each row's pressure and strain, as `force_n`
+    /// (tension positive; eq 3.9), to a CSV with columns `time_s,pressure_kpa,strain`.
     Axial {
         /// Input CSV with the columns `time_s,pressure_kpa,strain`; other columns are kept.
         input: PathBuf,
         /// Output CSV: the input columns plus `force_n`.
         #[arg(long)]
         out: PathBuf,
-        /// TOML configuration of the OCM; Table 3.1 defaults if absent.
+        /// TOML configuration of the OCM (a `preset` and overrides); the calibrated
+        /// parameter set if absent.
         #[arg(long)]
         config: Option<PathBuf>,
     },
@@ -25,7 +27,8 @@ pub enum ModelCommand {
     /// bar-and-hinge equilibrium (all nodes free): force, moment and
     /// neutral-axis deviations, and the pressure stability limit.
     Assumptions {
-        /// TOML configuration of the OCM; Table 3.1 defaults if absent.
+        /// TOML configuration of the OCM (a `preset` and overrides); the calibrated
+        /// parameter set if absent.
         #[arg(long)]
         config: Option<PathBuf>,
         /// Print the whole report as JSON.

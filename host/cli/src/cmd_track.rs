@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use ocm_hilsim::firmware::{lut_image, run_scenario_over, run_scenario_with_image};
 use ocm_hilsim::qemu::{QemuLink, build_board};
 use ocm_hilsim::serial::SerialLink;
@@ -53,12 +53,52 @@ fn parse_mcu(s: &str) -> Result<McuMode, String> {
     }
 }
 
+/// A lab scenario (the dissertation's experiments), or all of them.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scenario {
+    /// Every scenario below, in this order.
+    All,
+    /// Range of motion: the model's reachable tip positions against the plant's (no controller).
+    Rom,
+    /// A triangle traced with the tip at constant speed.
+    Triangle,
+    /// A circle traced with the tip at constant speed.
+    Circle,
+    /// Random target points held 10 s each, with an announced 250 g payload.
+    Points,
+    /// A held tilted pose while an announced tip force ramps up.
+    Orientation,
+    /// The circle with one chamber's supply cut for 5 s and restored.
+    Disconnect,
+    /// A held pose when an unannounced 250 g load is hung on the tip.
+    #[value(name = "step_load")]
+    StepLoad,
+}
+
+impl Scenario {
+    /// The scenarios this choice runs, by their lab names.
+    fn names(self) -> Vec<&'static str> {
+        use clap::ValueEnum;
+        match self {
+            Self::All => SCENARIOS.to_vec(),
+            one => {
+                let v = one.to_possible_value().expect("every scenario has a name");
+                SCENARIOS
+                    .iter()
+                    .copied()
+                    .filter(|n| *n == v.get_name())
+                    .collect()
+            }
+        }
+    }
+}
+
 /// Arguments of `ocm track`.
 #[derive(clap::Args, Debug)]
 pub struct TrackArgs {
-    /// Scenario name, or `all`.
-    #[arg(long, default_value = "all")]
-    scenario: String,
+    /// Which experiment to run.
+    #[arg(long, value_enum, default_value_t = Scenario::All)]
+    scenario: Scenario,
     /// Seed of every random process (noise, manufacturing spread, targets);
     /// default 1.
     #[arg(long)]
@@ -146,17 +186,7 @@ fn run_one(name: &str, cfg: &SimConfig, mcu: &Mcu) -> Result<ScenarioReport> {
 
 /// Runs `ocm track`.
 pub fn run(args: TrackArgs) -> Result<()> {
-    let names: Vec<&str> = if args.scenario == "all" {
-        SCENARIOS.to_vec()
-    } else if let Some(n) = SCENARIOS.iter().find(|n| **n == args.scenario) {
-        vec![n]
-    } else {
-        bail!(
-            "unknown scenario `{}`; choose one of {} or all",
-            args.scenario,
-            SCENARIOS.join(", ")
-        );
-    };
+    let names = args.scenario.names();
     let base = match (&args.config, args.params) {
         (Some(path), _) => read_config(path)?,
         (None, Some(p)) => SimConfig::with_preset(p.into()),
@@ -255,4 +285,28 @@ pub fn run(args: TrackArgs) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::ValueEnum;
+
+    /// The command line offers exactly the lab's scenarios, each running itself alone.
+    #[test]
+    fn scenario_choices_are_the_labs_scenarios() {
+        let offered: Vec<&str> = Scenario::value_variants()
+            .iter()
+            .filter(|s| **s != Scenario::All)
+            .flat_map(|s| s.names())
+            .collect();
+        assert_eq!(offered, SCENARIOS.to_vec());
+        for s in Scenario::value_variants()
+            .iter()
+            .filter(|s| **s != Scenario::All)
+        {
+            assert_eq!(s.names().len(), 1, "{s:?}");
+        }
+        assert_eq!(Scenario::All.names(), SCENARIOS.to_vec());
+    }
 }

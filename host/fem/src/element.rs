@@ -182,7 +182,7 @@ pub fn evaluate(
                             m[(0, 2)] - m[(2, 0)],
                             m[(1, 0)] - m[(0, 1)],
                         ) * 0.5;
-                        omega_m = crate::model::skew(&(2.0 * minv * w));
+                        omega_m = crate::rigid::skew(&(2.0 * minv * w));
                     }
                     for c in 0..4 {
                         let mut v = -(omega_m * rtx[c]);

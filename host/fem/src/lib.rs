@@ -39,7 +39,6 @@ pub mod element;
 pub mod material;
 pub mod model;
 pub mod npy;
-pub mod pattern;
 pub mod rigid;
 pub mod scene;
 pub mod solve;

@@ -9,6 +9,11 @@
 
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 
+/// Skew matrix `[v]x` with `[v]x w = v x w`.
+pub fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
 /// A set of model nodes that moves as one rigid body.
 #[derive(Debug, Clone)]
 pub struct RigidBody {

@@ -5,7 +5,8 @@
 //! (three per free node, six per body) to the node displacements: du_i = dc + dtheta x (x_i - c)
 //! for a slave. Elements entirely inside one body carry no strain and are skipped, except for mass.
 
-use crate::model::{Model, State};
+use super::description::Model;
+use super::state::State;
 use crate::{FemError, Result};
 use nalgebra::Vector3;
 
