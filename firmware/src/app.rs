@@ -31,7 +31,7 @@ use ocm_shared::protocol::{
 };
 
 use crate::calibration::HallMap;
-use crate::control::{Controller, GainsFx, LimitsFx};
+use crate::control::{Controller, GainsFx, LimitsFx, TickConsts};
 use crate::fx::sat;
 use crate::kinematics::{InverseSolution, Model, PreparedLoad, inverse_prepared, prime_bending};
 use crate::maps::{BendEntry, FastLut, MemoBend};
@@ -79,6 +79,15 @@ pub struct App<'a> {
     sampled_ticks: u16,
     decoder: FrameDecoder,
     bend_memo: core::cell::Cell<[BendEntry; 3]>,
+    /// The feedforward solution of the target in force, computed by
+    /// `SetTarget` (without a moment) or the first control tick after any
+    /// other command, and reused until the next one: it depends only on
+    /// what commands set (target, load, geometry, limits, LUT), so every
+    /// tick in between would recompute the same integers.
+    feedforward: Option<InverseSolution>,
+    /// The control law's per-tick constants (four 64-bit divisions), kept
+    /// like `feedforward` until the next command other than a frame.
+    tick_consts: Option<TickConsts>,
 }
 
 fn err(e: ProtocolError) -> ReplyBody {
@@ -111,6 +120,8 @@ impl<'a> App<'a> {
             sampled_ticks: 0,
             decoder: FrameDecoder::new(),
             bend_memo: core::cell::Cell::new([None; 3]),
+            feedforward: None,
+            tick_consts: None,
         };
         app.vent();
         app
@@ -180,6 +191,11 @@ impl<'a> App<'a> {
     pub fn handle(&mut self, cmd: &Command, now_us: u32) -> Reply {
         self.service(now_us);
         self.last_rx_us = now_us;
+        let setup = !matches!(cmd.body, CommandBody::SensorFrame(_));
+        if setup {
+            self.feedforward = None;
+            self.tick_consts = None;
+        }
         let body = match &cmd.body {
             CommandBody::Ping { nonce } => ReplyBody::Pong { nonce: *nonce },
             CommandBody::GetInfo => ReplyBody::Info(self.info()),
@@ -232,7 +248,7 @@ impl<'a> App<'a> {
                 ReplyBody::Ack
             }
         };
-        if !matches!(cmd.body, CommandBody::SensorFrame(_)) {
+        if setup {
             self.prime_bend_memo();
         }
         Reply { seq: cmd.seq, body }

@@ -72,6 +72,49 @@ const ATAN_Q30: [i32; 31] = [
 /// converged to Q1.30 precision long before the last step).
 const CORDIC_K_Q30: i32 = 652_032_874;
 
+/// One CORDIC rotation-mode step `I` on `[x, y, z]`: turns the vector by
+/// `-+atan(2^-I)`, driving the angle `z` to zero. Branch-free: the
+/// direction is a sign `+-1` that multiplies, not a branch a host CPU
+/// would mispredict half the time (a Cortex-M multiplies in one cycle).
+#[inline(always)]
+fn rotate_step<const I: u32>(v: &mut [i32; 3]) {
+    let [x, y, z] = *v;
+    // +1 where z >= 0, -1 where z < 0.
+    let s = (z >> 31) | 1;
+    *v = [
+        x.wrapping_sub(s.wrapping_mul(y >> I)),
+        y.wrapping_add(s.wrapping_mul(x >> I)),
+        z.wrapping_sub(s.wrapping_mul(ATAN_Q30[I as usize])),
+    ];
+}
+
+/// One CORDIC vectoring-mode step `I` on `[x, y, z]`: turns the vector
+/// towards the x axis, accumulating the angle turned in `z`.
+#[inline(always)]
+fn vector_step<const I: u32>(v: &mut [i32; 3]) {
+    let [x, y, z] = *v;
+    // +1 where y > 0, -1 where y <= 0.
+    let s = 2 * i32::from(y > 0) - 1;
+    *v = [
+        x.wrapping_add(s.wrapping_mul(y >> I)),
+        y.wrapping_sub(s.wrapping_mul(x >> I)),
+        z.wrapping_add(s.wrapping_mul(ATAN_Q30[I as usize])),
+    ];
+}
+
+/// The `CORDIC_STEPS` steps of `$step` on `$v`, written out: constant
+/// shifts (free on a Cortex-M's barrel shifter) and no loop counter or
+/// table walk, the same operations in the same order as a loop.
+macro_rules! cordic {
+    ($step:ident, $v:ident) => {
+        cordic!(@ $step, $v; 0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25)
+    };
+    (@ $step:ident, $v:ident; $($i:literal)*) => {{
+        const _: () = assert!([$($i),*].len() == CORDIC_STEPS);
+        $($step::<$i>(&mut $v);)*
+    }};
+}
+
 /// Clamps an `i64` into `i32`.
 #[inline]
 pub fn sat(x: i64) -> i32 {
@@ -156,21 +199,9 @@ pub fn sin_cos_q28(angle_q28: i32) -> (i32, i32) {
         flip = true;
     }
     // |a| <= pi/2 fits Q1.30.
-    let mut z = a << 2;
-    let mut x = CORDIC_K_Q30;
-    let mut y = 0i32;
-    for (i, &t) in ATAN_Q30.iter().enumerate().take(CORDIC_STEPS) {
-        let (dx, dy) = (y >> i, x >> i);
-        if z >= 0 {
-            x -= dx;
-            y += dy;
-            z -= t;
-        } else {
-            x += dx;
-            y -= dy;
-            z += t;
-        }
-    }
+    let mut r = [CORDIC_K_Q30, 0, a << 2];
+    cordic!(rotate_step, r);
+    let [x, y, _] = r;
     if flip { (-y, -x) } else { (y, x) }
 }
 
@@ -198,20 +229,9 @@ pub fn atan2_q28(y: i64, x: i64) -> i32 {
         x <<= -shift;
         y <<= -shift;
     }
-    let (mut x, mut y) = (x as i32, y as i32);
-    let mut z = 0i32;
-    for (i, &t) in ATAN_Q30.iter().enumerate().take(CORDIC_STEPS) {
-        let (dx, dy) = (y >> i, x >> i);
-        if y > 0 {
-            x += dx;
-            y -= dy;
-            z += t;
-        } else {
-            x -= dx;
-            y += dy;
-            z -= t;
-        }
-    }
+    let mut v = [x as i32, y as i32, 0i32];
+    cordic!(vector_step, v);
+    let z = v[2];
     let r = i64::from(rshift_round(i64::from(z), 2) as i32) + i64::from(offset);
     wrap_angle_q28(sat(r))
 }
@@ -276,6 +296,46 @@ pub fn to_f64(raw: i64, frac: i32) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The CORDIC as a plain loop with branches: the form the unrolled,
+    /// branch-free steps must reproduce bit for bit.
+    fn cordic_loop(mut v: [i32; 3], vectoring: bool) -> [i32; 3] {
+        for (i, &t) in ATAN_Q30.iter().enumerate().take(CORDIC_STEPS) {
+            let [x, y, z] = v;
+            let (dx, dy) = (y >> i, x >> i);
+            let forward = if vectoring { y > 0 } else { z < 0 };
+            v = if forward {
+                [x + dx, y - dy, z + t]
+            } else {
+                [x - dx, y + dy, z - t]
+            };
+        }
+        v
+    }
+
+    #[test]
+    fn unrolled_steps_match_the_loop_bit_for_bit() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for _ in 0..20_000 {
+            let r = next();
+            // Angles within +-pi/2 in Q1.30 (what sin_cos feeds in) and
+            // vectors below 2^29 (what atan2 normalises to).
+            let z = ((r as i32) >> 1).clamp(-2 * HALF_PI_Q28 * 2, 2 * HALF_PI_Q28 * 2);
+            let mut rot = [CORDIC_K_Q30, 0, z];
+            cordic!(rotate_step, rot);
+            assert_eq!(rot, cordic_loop([CORDIC_K_Q30, 0, z], false), "z = {z}");
+            let (x, y) = ((r >> 35) as i32 & 0x1fff_ffff, (r as i32) >> 3);
+            let mut vec = [x, y, 0];
+            cordic!(vector_step, vec);
+            assert_eq!(vec, cordic_loop([x, y, 0], true), "x = {x}, y = {y}");
+        }
+    }
 
     fn rad(q: i32) -> f64 {
         angle_q28_to_rad(q)

@@ -25,7 +25,7 @@ use crate::SimError;
 use crate::mcu::{Mcu, McuInput, PressureLimits};
 use crate::pcc::Config;
 use crate::plant::{Mounting, PlantParams};
-use crate::sensors::HallParams;
+use crate::sensors::{HallParams, round_ties_away};
 
 /// LUT buffer size the boards reserve, bytes (the one shared constant).
 pub use ocm_shared::lut::LUT_CAPACITY;
@@ -36,10 +36,20 @@ pub trait Link {
     /// simulated time (an in-process app has no clock of its own).
     fn exchange(&mut self, cmd: &Command, now_us: u32) -> Result<Reply, SimError>;
 
-    /// Sends `cmds` and returns their replies in order. A byte link sends
-    /// them back to back before it waits, paying the link's latency once.
-    fn exchange_all(&mut self, cmds: &[Command], now_us: u32) -> Result<Vec<Reply>, SimError> {
-        cmds.iter().map(|c| self.exchange(c, now_us)).collect()
+    /// Sends `cmds` and appends their replies in order to `replies`. A byte
+    /// link sends them back to back before it waits, paying the link's
+    /// latency once. The caller owns `replies` so that a tick allocates
+    /// nothing.
+    fn exchange_all(
+        &mut self,
+        cmds: &[Command],
+        now_us: u32,
+        replies: &mut Vec<Reply>,
+    ) -> Result<(), SimError> {
+        for c in cmds {
+            replies.push(self.exchange(c, now_us)?);
+        }
+        Ok(())
     }
 }
 
@@ -83,15 +93,20 @@ pub struct FirmwareMcu<L: Link> {
     now_us: u32,
     period_us: u32,
     last_target: Option<SegmentConfig>,
+    /// The last target configuration and its conversion: the reference
+    /// moves once per target update, not every tick.
+    last_config: Option<(Config, SegmentConfig)>,
     load: Load,
     mode: Mode,
     name: String,
+    /// Reply buffer reused by every exchange.
+    replies: Vec<Reply>,
 }
 
+#[inline]
 fn q(v: f64, bits: u32) -> i32 {
-    (v * f64::from(1u32 << bits))
-        .round()
-        .clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+    round_ties_away(v * f64::from(1u32 << bits)).clamp(i64::from(i32::MIN), i64::from(i32::MAX))
+        as i32
 }
 
 /// The LUT image for `plant`, with a pressure grid covering `limits`.
@@ -161,6 +176,7 @@ impl<L: Link> FirmwareMcu<L> {
             now_us: 0,
             period_us,
             last_target: None,
+            last_config: None,
             load: Load::default(),
             mode: if closed_loop {
                 Mode::ClosedLoop
@@ -173,6 +189,7 @@ impl<L: Link> FirmwareMcu<L> {
                 "firmware_ol"
             }
             .to_string(),
+            replies: Vec::with_capacity(3),
         };
         // A board may still run an earlier session: stop it, clear its
         // latched faults and check that it speaks this protocol and ticks
@@ -246,12 +263,10 @@ impl<L: Link> FirmwareMcu<L> {
         self.error(format!("unexpected reply {body:?}"))
     }
 
-    /// Sends `bodies` in one batch under fresh sequence numbers; every reply
-    /// must answer its own command and none may be an error.
-    fn exchange(
-        &mut self,
-        bodies: impl IntoIterator<Item = CommandBody>,
-    ) -> Result<Vec<Reply>, SimError> {
+    /// Sends `bodies` in one batch under fresh sequence numbers, leaving
+    /// the replies in `self.replies`; every reply must answer its own
+    /// command and none may be an error.
+    fn exchange(&mut self, bodies: impl IntoIterator<Item = CommandBody>) -> Result<(), SimError> {
         let mut cmds: HVec<Command, 3> = HVec::new();
         for body in bodies {
             self.seq = self.seq.wrapping_add(1);
@@ -261,15 +276,17 @@ impl<L: Link> FirmwareMcu<L> {
             })
             .map_err(|_| self.error("more than 3 commands in one batch".into()))?;
         }
-        let replies = self.link.exchange_all(&cmds, self.now_us)?;
-        if replies.len() != cmds.len() {
+        self.replies.clear();
+        self.link
+            .exchange_all(&cmds, self.now_us, &mut self.replies)?;
+        if self.replies.len() != cmds.len() {
             return Err(self.error(format!(
                 "{} replies to {} commands",
-                replies.len(),
+                self.replies.len(),
                 cmds.len()
             )));
         }
-        for (c, r) in cmds.iter().zip(&replies) {
+        for (c, r) in cmds.iter().zip(&self.replies) {
             if r.seq != c.seq {
                 return Err(self.error(format!(
                     "reply to command {} answers command {}: {:?}",
@@ -284,12 +301,12 @@ impl<L: Link> FirmwareMcu<L> {
                 )));
             }
         }
-        Ok(replies)
+        Ok(())
     }
 
     fn expect_ok(&mut self, body: CommandBody) -> Result<ReplyBody, SimError> {
-        let mut replies = self.exchange([body])?;
-        replies
+        self.exchange([body])?;
+        self.replies
             .pop()
             .map(|r| r.body)
             .ok_or_else(|| self.error("no reply".into()))
@@ -307,10 +324,17 @@ impl<L: Link> Mcu for FirmwareMcu<L> {
 
     fn tick(&mut self, input: &McuInput<'_>) -> Result<[f64; 3], SimError> {
         let c: Config = input.target;
-        let target = SegmentConfig {
-            backbone_q24: q(c.backbone_m, 24),
-            bend_q28: q(c.bend_rad(), 28),
-            direction_q28: q(c.bend_y_rad.atan2(c.bend_x_rad), 28),
+        let target = match self.last_config {
+            Some((last, t)) if last == c => t,
+            _ => {
+                let t = SegmentConfig {
+                    backbone_q24: q(c.backbone_m, 24),
+                    bend_q28: q(c.bend_rad(), 28),
+                    direction_q28: q(c.bend_y_rad.atan2(c.bend_x_rad), 28),
+                };
+                self.last_config = Some((c, t));
+                t
+            }
         };
         let l = &input.expected_load;
         let load = Load {
@@ -339,12 +363,17 @@ impl<L: Link> Mcu for FirmwareMcu<L> {
         let frame = SensorFrame {
             hall_codes: s.hall_codes.iter().copied().collect(),
             imu_quat_q14: quat,
-            pressures_pa: s.pressures_pa.iter().map(|p| p.round() as i32).collect(),
+            pressures_pa: s
+                .pressures_pa
+                .iter()
+                .map(|&p| round_ties_away(p).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32)
+                .collect(),
         };
         let _ = bodies.push(CommandBody::SensorFrame(frame));
         self.now_us = self.now_us.wrapping_add(self.period_us);
-        let replies = self.exchange(bodies)?;
-        let (last, setup) = replies
+        self.exchange(bodies)?;
+        let (last, setup) = self
+            .replies
             .split_last()
             .ok_or_else(|| self.error("no reply".into()))?;
         if let Some(bad) = setup.iter().find(|r| r.body != ReplyBody::Ack) {

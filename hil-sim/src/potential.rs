@@ -36,19 +36,21 @@ struct Cheb2 {
     c: Vec<f64>,
 }
 
-/// Chebyshev basis values and derivatives (with respect to the mapped
-/// variable in `[-1, 1]`).
-fn basis(t: f64, n: usize, v: &mut [f64; MAX_ORDER], dv: &mut [f64; MAX_ORDER]) {
+/// Chebyshev basis values and derivatives of orders `0..N` (with respect
+/// to the mapped variable in `[-1, 1]`).
+fn basis<const N: usize>(t: f64) -> ([f64; N], [f64; N]) {
+    let (mut v, mut dv) = ([0.0; N], [0.0; N]);
     v[0] = 1.0;
     dv[0] = 0.0;
-    if n > 1 {
+    if N > 1 {
         v[1] = t;
         dv[1] = 1.0;
     }
-    for j in 2..n {
+    for j in 2..N {
         v[j] = 2.0 * t * v[j - 1] - v[j - 2];
         dv[j] = 2.0 * v[j - 1] + 2.0 * t * dv[j - 1] - dv[j - 2];
     }
+    (v, dv)
 }
 
 impl Cheb2 {
@@ -209,12 +211,8 @@ impl OcmPotential {
         let ty = (2.0 * w - y.0 - y.1) / (y.1 - y.0);
         let sx = 2.0 / (x.1 - x.0);
         let sy = 2.0 / (y.1 - y.0);
-        let (mut vy, mut dvy) = ([0.0; MAX_ORDER], [0.0; MAX_ORDER]);
-        basis(ty, NY, &mut vy, &mut dvy);
-        let (vy, dvy): (&[f64; NY], &[f64; NY]) = (
-            vy[..NY].try_into().expect("NY <= MAX_ORDER"),
-            dvy[..NY].try_into().expect("NY <= MAX_ORDER"),
-        );
+        let (vy, dvy) = basis::<NY>(ty);
+        let (vy, dvy) = (&vy, &dvy);
         let dot = |a: &[f64; NY], b: &[f64; NY]| {
             let (mut p, mut q) = (0.0, 0.0);
             for k in (0..NY).step_by(2) {
@@ -230,7 +228,8 @@ impl OcmPotential {
             let (ce, cv) = (&self.coef[0][j], &self.coef[1][j]);
             *r = [dot(ce, vy), dot(ce, dvy), dot(cv, vy), dot(cv, dvy)];
         }
-        strains.map(|e| {
+        let mut out = [EnergyGrad::default(); 3];
+        for (o, &e) in out.iter_mut().zip(&strains) {
             let tx = (2.0 * e - x.0 - x.1) / (x.1 - x.0);
             // T_j(x) and T_j'(x) by their recurrences, accumulated on the
             // fly: six independent sums per step.
@@ -254,7 +253,7 @@ impl OcmPotential {
                 add(t2, d2, r);
                 (t0, t1, d0, d1) = (t1, t2, d1, d2);
             }
-            EnergyGrad {
+            *o = EnergyGrad {
                 elastic: PartGrad {
                     value: acc[0],
                     d_strain: acc[1] * sx,
@@ -265,7 +264,8 @@ impl OcmPotential {
                     d_strain: acc[4] * sx,
                     d_w: acc[5] * sy,
                 },
-            }
-        })
+            };
+        }
+        out
     }
 }

@@ -232,7 +232,12 @@ impl Link for QemuLink {
         self.link.exchange(cmd, now_us)
     }
 
-    fn exchange_all(&mut self, cmds: &[Command], now_us: u32) -> Result<Vec<Reply>, SimError> {
-        self.link.exchange_all(cmds, now_us)
+    fn exchange_all(
+        &mut self,
+        cmds: &[Command],
+        now_us: u32,
+        replies: &mut Vec<Reply>,
+    ) -> Result<(), SimError> {
+        self.link.exchange_all(cmds, now_us, replies)
     }
 }

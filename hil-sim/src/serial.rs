@@ -155,10 +155,18 @@ impl Link for SerialLink {
         self.reply_to(cmd)
     }
 
-    fn exchange_all(&mut self, cmds: &[Command], _now_us: u32) -> Result<Vec<Reply>, SimError> {
+    fn exchange_all(
+        &mut self,
+        cmds: &[Command],
+        _now_us: u32,
+        replies: &mut Vec<Reply>,
+    ) -> Result<(), SimError> {
         for c in cmds {
             self.send(c)?;
         }
-        cmds.iter().map(|c| self.reply_to(c)).collect()
+        for c in cmds {
+            replies.push(self.reply_to(c)?);
+        }
+        Ok(())
     }
 }

@@ -128,6 +128,11 @@ impl<'a> App<'a> {
                 return err(ProtocolError::Unreachable);
             };
             bend_p_q8 = segment_means(&sol);
+            // Without a moment the tick's solution ignores the bending hint
+            // and is this one: no need to solve again at the first tick.
+            if load.moment.m_q24 == 0 {
+                self.feedforward = Some(sol);
+            }
         }
         self.target = Some(TargetState {
             configs,

@@ -10,9 +10,7 @@ use ocm_shared::protocol::{
 use super::{App, err};
 use crate::control::TickConsts;
 use crate::estimate::{estimate, imu_tilt};
-use crate::kinematics::{
-    InverseSolution, forward_prepared, inverse_prepared, lengths_from_vector, tip_position,
-};
+use crate::kinematics::{forward_prepared, inverse_prepared, lengths_from_vector, tip_position};
 use crate::maps::MemoBend;
 use crate::safety::check_frame;
 
@@ -104,24 +102,28 @@ impl<'a> App<'a> {
         };
         // The bending map runs once, at the target's own feedforward mean
         // pressure (its pressure dependence is weak), from the memo that
-        // `handle` primed.
-        let maps = MemoBend::new(img, &self.bend_memo);
-        let ff: Option<InverseSolution> = inverse_prepared(
-            &maps,
-            &self.model,
-            &t.load,
-            &t.configs,
-            (self.limits.min_q8, self.limits.max_q8),
-            Some(&t.bend_p_q8),
-        );
-        let Some(ff) = ff else {
+        // `handle` primed; the solution is kept until the next command.
+        if self.feedforward.is_none() {
+            let maps = MemoBend::new(img, &self.bend_memo);
+            self.feedforward = inverse_prepared(
+                &maps,
+                &self.model,
+                &t.load,
+                &t.configs,
+                (self.limits.min_q8, self.limits.max_q8),
+                Some(&t.bend_p_q8),
+            );
+        }
+        let Some(ff) = &self.feedforward else {
             self.faults |= fault::MODEL;
             self.enter_safe();
             return;
         };
         let closed = self.mode == Mode::ClosedLoop && have_estimate;
-        let k = TickConsts::new(&self.gains, &self.limits, dt);
-        for (i, &meas) in measured.iter().enumerate().take(self.actuators()) {
+        let k = *self
+            .tick_consts
+            .get_or_insert_with(|| TickConsts::new(&self.gains, &self.limits, dt));
+        for (i, &meas) in measured.iter().enumerate().take(3 * self.model.segments) {
             let p_ff = ff.pressures_q8.get(i).copied().unwrap_or(0);
             if closed {
                 let target = ff.lengths_q24.get(i).copied().unwrap_or(0);

@@ -53,10 +53,11 @@ pub(super) fn simulate(
         .duration_cap_s
         .map_or(su.duration_s, |c| c.min(su.duration_s));
     let steps = (duration / dt).round() as usize;
-    let mut log = Vec::new();
-    let mut errs = Vec::new();
-    let mut err_t = Vec::new();
-    let mut q_errs = Vec::new();
+    // Sized once: no reallocation inside the loop.
+    let mut log = Vec::with_capacity(steps / cfg.log_every.max(1) + 1);
+    let mut errs = Vec::with_capacity(steps);
+    let mut err_t = Vec::with_capacity(steps);
+    let mut q_errs = Vec::with_capacity(steps);
     let (mut p_hi, mut p_lo) = (f64::NEG_INFINITY, f64::INFINITY);
     let (mut cmd_hi, mut cmd_lo) = (f64::NEG_INFINITY, f64::INFINITY);
     let mut violations = 0usize;
@@ -66,6 +67,8 @@ pub(super) fn simulate(
     // The target changes only with each update of the stream: its
     // configuration (an inverse solve) is computed once per update.
     let mut target: Option<(f64, Config)> = None;
+    let log_every = cfg.log_every.max(1);
+    let mut log_in = 0usize;
     for k in 0..steps {
         let t = k as f64 * dt;
         state.load = su.load_at(t, cfg);
@@ -125,7 +128,9 @@ pub(super) fn simulate(
         let tip = state.q.position();
         let rf = su.path.tip_at(tn);
         let err = distance(tip, rf);
-        let logged = k % cfg.log_every.max(1) == 0;
+        // k % log_every == 0, counted down rather than divided.
+        let logged = log_in == 0;
+        log_in = if logged { log_every - 1 } else { log_in - 1 };
         let scored = tn >= su.score_from_s;
         // The orientation error costs a configuration solve: only where used.
         let q_err = if logged || (scored && name == "orientation") {
