@@ -5,18 +5,17 @@ use crate::cmd_fem::{BELLOWS_MESH, data_path};
 use crate::plot::{Chart, Series};
 use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use ocm_fem::bellows::{Bellows, BellowsConfig};
-use ocm_fem::npy;
+use ocm_mor::curve::CurveOptions;
 use ocm_mor::dataset::{self, DatasetSpec, ModelKind};
-use ocm_mor::drive::{self, DriveConfig};
+use ocm_mor::drive::DriveConfig;
 use ocm_mor::pod::{PodOptions, Truncation};
 use ocm_mor::rom::ReducedModel;
-use ocm_mor::store::{self, PodRecord, ReducedProbe, RomRecord};
-use ocm_mor::xs::{XS_DIM, XsProbe};
+use ocm_mor::store::{self, PodRecord, ReducedProbe, RomRecord, Snapshots};
+use ocm_mor::xs::XsProbe;
 use ocm_mor::{full, run};
-use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Model-order reduction subcommands.
 #[derive(clap::Subcommand, Debug)]
@@ -48,11 +47,12 @@ pub enum MorCommand {
     },
     /// POD basis of the training snapshots by randomized SVD; reports singular values, captured
     /// energy and the projection error of the held-out snapshots. With --bench, times the SVD of a
-    /// seeded Gaussian matrix of the dissertation's size instead.
+    /// seeded matrix of the dissertation's size (12,981 x 20,000 to rank 1,223) whose spectrum is
+    /// that of --snapshots (measured, then continued at its decay rate), or Gaussian without.
     Pod {
         #[command(flatten)]
         mesh: MeshArgs,
-        /// Snapshot folder (from `ocm mor snapshots`).
+        /// With --bench: the benchmark matrix takes the spectrum of these snapshots (else Gaussian).
         #[arg(long, required_unless_present = "bench")]
         snapshots: Option<PathBuf>,
         /// Keep exactly this many modes.
@@ -119,14 +119,17 @@ pub enum MorCommand {
         #[arg(long)]
         snapshots: PathBuf,
         /// Basis sizes.
-        #[arg(long, value_delimiter = ',', default_value = "4,8,16,32")]
+        #[arg(long, value_delimiter = ',', default_value = "8,16,24,32")]
         ranks: Vec<usize>,
         /// ECSW tolerances (0 = plain Galerkin, every element).
         #[arg(long, value_delimiter = ',', default_value = "1e-2,1e-3")]
         tolerances: Vec<f64>,
         /// Use every k-th training snapshot for ECSW.
-        #[arg(long, default_value_t = 10)]
+        #[arg(long, default_value_t = 5)]
         every: usize,
+        /// Full-FEM steps re-timed in this run (first held-out sequence; 0 = all of it).
+        #[arg(long, default_value_t = 0)]
+        full_steps: usize,
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
@@ -193,20 +196,6 @@ pub enum ModelArg {
     Reduced,
 }
 
-/// What `ocm mor snapshots` stored.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-struct SnapshotRecord {
-    model_hash: String,
-    seed: u64,
-    sequences: usize,
-    held_out: usize,
-    steps: usize,
-    dt_s: f64,
-    dofs: usize,
-    /// Full-model wall time per step, s (all sequences).
-    seconds_per_step: f64,
-}
-
 fn bar(n: usize, what: &str) -> ProgressBar {
     let b = ProgressBar::new(n as u64);
     if let Ok(style) =
@@ -216,77 +205,6 @@ fn bar(n: usize, what: &str) -> ProgressBar {
     }
     b.set_message(what.to_string());
     b
-}
-
-struct Snapshots {
-    rec: SnapshotRecord,
-    /// Rows = snapshots (M x 3N).
-    disp: npy::Array2,
-    xs: npy::Array2,
-}
-
-fn load_snapshots(dir: &Path, model_hash: &str) -> anyhow::Result<Snapshots> {
-    let jp = dir.join("snapshots.json");
-    let rec: SnapshotRecord = serde_json::from_str(
-        &std::fs::read_to_string(&jp).with_context(|| format!("reading {}", jp.display()))?,
-    )
-    .with_context(|| format!("{}: not a snapshot record", jp.display()))?;
-    if rec.model_hash != model_hash {
-        bail!(
-            "{}: snapshots of model {}, not of this model {model_hash}",
-            jp.display(),
-            rec.model_hash
-        );
-    }
-    let disp = npy::read_f64_2d(dir.join("displacements.npy"))?;
-    let xs = npy::read_f64_2d(dir.join("xs.npy"))?;
-    let m = (rec.sequences + rec.held_out) * rec.steps;
-    if (disp.rows, disp.cols) != (m, rec.dofs) {
-        bail!(
-            "{}: shape ({}, {}) but snapshots.json implies ({m}, {})",
-            dir.join("displacements.npy").display(),
-            disp.rows,
-            disp.cols,
-            rec.dofs
-        );
-    }
-    if (xs.rows, xs.cols) != (m, 2 * XS_DIM) {
-        bail!(
-            "{}: shape ({}, {}) but expected ({m}, {})",
-            dir.join("xs.npy").display(),
-            xs.rows,
-            xs.cols,
-            2 * XS_DIM
-        );
-    }
-    Ok(Snapshots { rec, disp, xs })
-}
-
-impl Snapshots {
-    fn train_rows(&self) -> usize {
-        self.rec.sequences * self.rec.steps
-    }
-    /// Column-major 3N x k faer matrix of rows a..b.
-    fn matrix(&self, a: usize, b: usize) -> faer::Mat<f64> {
-        let n = self.disp.cols;
-        faer::Mat::<f64>::from_fn(n, b - a, |i, j| self.disp.data[(a + j) * n + i])
-    }
-    fn xs_row(&self, k: usize) -> [f64; 2 * XS_DIM] {
-        let mut o = [0.0; 2 * XS_DIM];
-        o.copy_from_slice(&self.xs.data[k * 2 * XS_DIM..(k + 1) * 2 * XS_DIM]);
-        o
-    }
-    /// Held-out sequences: (sequence index, inputs, full X_S rows).
-    fn held_out(&self) -> Vec<(usize, Vec<drive::Input>, Vec<[f64; 2 * XS_DIM]>)> {
-        let r = &self.rec;
-        (r.sequences..r.sequences + r.held_out)
-            .map(|k| {
-                let inputs = drive::sequence(&DriveConfig::default(), r.seed, k as u64, r.steps);
-                let xs = (0..r.steps).map(|j| self.xs_row(k * r.steps + j)).collect();
-                (k, inputs, xs)
-            })
-            .collect()
-    }
 }
 
 fn peak_rss_gib() -> Option<f64> {
@@ -300,29 +218,21 @@ fn galerkin(b: &Bellows, basis: DMatrix<f64>) -> anyhow::Result<ReducedModel> {
     Ok(ReducedModel::galerkin(&b.model, basis, &b.top_face)?)
 }
 
-fn training_q(s: &Snapshots, basis: &DMatrix<f64>, every: usize) -> Vec<DVector<f64>> {
-    let n = s.disp.cols;
-    (0..s.train_rows())
-        .step_by(every.max(1))
-        .map(|k| basis.transpose() * DVector::from_column_slice(&s.disp.data[k * n..(k + 1) * n]))
-        .collect()
-}
-
-/// Scores a reduced model on the held-out sequences: (TCP RMSE mm, seconds per step).
+/// Scores a reduced model on the held-out sequences: (TCP RMSE mm, median seconds per step).
 fn score(b: &Bellows, rom: &ReducedModel, s: &Snapshots) -> anyhow::Result<(f64, f64)> {
     let probe = ReducedProbe::new(XsProbe::of_bellows(b), rom);
-    let (mut sq, mut n, mut secs) = (0.0, 0usize, 0.0);
-    for (_, inputs, xs_full) in s.held_out() {
-        let (xs, t) = run::simulate_reduced(rom, &probe, &inputs, s.rec.dt_s)?;
-        let e = run::tcp_rmse_mm(&xs, &xs_full)?;
-        sq += e * e * xs.len() as f64;
-        n += xs.len();
-        secs += t;
+    let (mut sq, mut n, mut times) = (0.0, 0usize, vec![]);
+    for (_, inputs, xs_full) in s.held_out(&DriveConfig::default()) {
+        let r = run::simulate_reduced(rom, &probe, &inputs, s.rec.dt_s)?;
+        let e = run::tcp_rmse_mm(&r.xs, &xs_full)?;
+        sq += e * e * r.xs.len() as f64;
+        n += r.xs.len();
+        times.extend(r.step_seconds);
     }
     if n == 0 {
         bail!("no held-out sequences in the snapshot folder (use --held-out)");
     }
-    Ok(((sq / n as f64).sqrt(), secs / n as f64))
+    Ok(((sq / n as f64).sqrt(), run::median(&times)))
 }
 
 fn basis_from_pod(p: &ocm_mor::pod::Pod) -> DMatrix<f64> {
@@ -345,35 +255,13 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
             let cfg = DriveConfig::default();
             let total = sequences + held_out;
             let pb = bar(total * steps, "full FEM steps");
-            let (mut disp, mut xs, mut secs) = (vec![], vec![], 0.0);
-            for k in 0..total {
-                let inputs = drive::sequence(&cfg, seed, k as u64, steps);
-                let tr = full::simulate(&b, &inputs, cfg.dt_s, true, |j| {
-                    pb.set_position((k * steps + j + 1) as u64)
+            let (rec, disp, xs) =
+                full::record_snapshots(&b, &cfg, seed, sequences, held_out, steps, |k| {
+                    pb.set_position(k as u64)
                 })?;
-                secs += tr.seconds;
-                disp.extend(tr.displacements.into_iter().flatten());
-                xs.extend(tr.xs.iter().flatten().copied());
-            }
             pb.finish_and_clear();
-            std::fs::create_dir_all(&out)?;
-            let dofs = 3 * b.model.num_nodes();
-            npy::write_f64_2d_path(out.join("displacements.npy"), &disp, total * steps, dofs)?;
-            npy::write_f64_2d_path(out.join("xs.npy"), &xs, total * steps, 2 * XS_DIM)?;
-            let rec = SnapshotRecord {
-                model_hash: store::model_hash(&b),
-                seed,
-                sequences,
-                held_out,
-                steps,
-                dt_s: cfg.dt_s,
-                dofs,
-                seconds_per_step: secs / (total * steps) as f64,
-            };
-            std::fs::write(
-                out.join("snapshots.json"),
-                serde_json::to_string_pretty(&rec)?,
-            )?;
+            store::save_snapshots(&out, &rec, &disp, &xs)?;
+            let dofs = rec.dofs;
             if json {
                 println!("{}", serde_json::to_string(&rec)?);
             } else {
@@ -415,22 +303,82 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
                 seed: 1,
             };
             if bench {
-                let a = ocm_mor::pod::gaussian_matrix(rows, cols, 7);
+                let rank = match truncation {
+                    Truncation::Rank(r) => r,
+                    Truncation::Energy { max_rank, .. } => max_rank,
+                };
+                // The spectrum: measured on real snapshots when given, else none (Gaussian).
+                let (a, held, sigma, source) = match snapshots.as_ref() {
+                    Some(sdir) => {
+                        let b = mesh.load()?;
+                        let s = store::load_snapshots(sdir, &store::model_hash(&b))?;
+                        let train = s.matrix(0, s.train_rows());
+                        let measured_rank = 300.min(train.nrows().min(train.ncols()) - 10);
+                        let real = ocm_mor::pod::pod(
+                            train.as_ref(),
+                            &PodOptions {
+                                truncation: Truncation::Rank(measured_rank),
+                                ..opts
+                            },
+                        )?;
+                        let measured = &real.singular_values[..measured_rank];
+                        let k = (rank + 200).min(rows).min(cols);
+                        let sigma = ocm_mor::pod::continued_spectrum(measured, k)?;
+                        eprintln!(
+                            "building the {rows} x {cols} matrix with the spectrum of {} real snapshots ({measured_rank} measured values, {} continued) ...",
+                            s.train_rows(),
+                            k.saturating_sub(measured_rank)
+                        );
+                        let (a, h) = ocm_mor::pod::spectrum_matrix(&sigma, rows, cols, 500, 7)?;
+                        (
+                            a,
+                            Some(h),
+                            Some(sigma),
+                            format!("spectrum of {}", sdir.display()),
+                        )
+                    }
+                    None => (
+                        ocm_mor::pod::gaussian_matrix(rows, cols, 7),
+                        None,
+                        None,
+                        "Gaussian (no decay)".to_string(),
+                    ),
+                };
+                let rss_before = peak_rss_gib();
                 let t0 = std::time::Instant::now();
                 let p = ocm_mor::pod::pod(a.as_ref(), &opts)?;
                 let secs = t0.elapsed().as_secs_f64();
+                // Accuracy against the exact spectrum the matrix was built with.
+                let sv_error = sigma.as_ref().map(|sg| {
+                    (0..p.rank())
+                        .map(|i| (p.singular_values[i] - sg[i]).abs() / sg[i])
+                        .fold(0.0f64, f64::max)
+                });
+                let held_err = held.as_ref().map(|h| p.projection_error(h.as_ref()));
+                let sv: Vec<f64> = p.singular_values.iter().take(p.rank()).copied().collect();
                 let summary = serde_json::json!({
                     "rows": rows, "cols": cols, "rank": p.rank(), "oversampling": oversampling,
-                    "power_iterations": power_iterations, "seconds": secs,
+                    "power_iterations": power_iterations, "seconds": secs, "matrix": source,
+                    "captured_energy": p.captured_energy(),
+                    "max_relative_singular_value_error": sv_error,
+                    "held_out_projection_error": held_err,
+                    "peak_rss_gib_before_svd": rss_before,
                     "peak_rss_gib": peak_rss_gib(), "threads": rayon_threads(),
+                    "singular_values": sv,
                 });
                 if json {
                     println!("{summary}");
                 } else {
                     println!(
-                        "randomized SVD of a {rows} x {cols} matrix to rank {}: {secs:.1} s, peak memory {:.2} GiB",
+                        "randomized SVD of a {rows} x {cols} matrix ({source}) to rank {}: {secs:.1} s, peak memory {:.2} GiB; captured energy {:.9}, max relative singular-value error {:?}, held-out projection error {:?}; sigma_1 = {:.4e}, sigma_{} = {:.4e}",
                         p.rank(),
-                        peak_rss_gib().unwrap_or(f64::NAN)
+                        peak_rss_gib().unwrap_or(f64::NAN),
+                        p.captured_energy(),
+                        sv_error,
+                        held_err,
+                        sv[0],
+                        p.rank(),
+                        sv[p.rank() - 1]
                     );
                 }
                 return Ok(());
@@ -440,7 +388,7 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
             };
             let b = mesh.load()?;
             let hash = store::model_hash(&b);
-            let s = load_snapshots(&sdir, &hash)?;
+            let s = store::load_snapshots(&sdir, &hash)?;
             let train = s.matrix(0, s.train_rows());
             let t0 = std::time::Instant::now();
             let p = ocm_mor::pod::pod(train.as_ref(), &opts)?;
@@ -497,11 +445,11 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
         } => {
             let b = mesh.load()?;
             let hash = store::model_hash(&b);
-            let s = load_snapshots(&snapshots, &hash)?;
+            let s = store::load_snapshots(&snapshots, &hash)?;
             let (v, _) = store::load_basis(&basis, &hash, 3 * b.model.num_nodes())?;
             let gal = galerkin(&b, v.clone())?;
             let t0 = std::time::Instant::now();
-            let ecsw = gal.hyper_reduce(&training_q(&s, &v, every), tolerance)?;
+            let ecsw = gal.hyper_reduce(&s.training_q(&v, every), tolerance)?;
             let train_secs = t0.elapsed().as_secs_f64();
             let rec = RomRecord {
                 basis_hash: store::basis_hash(&v),
@@ -542,60 +490,37 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
             ranks,
             tolerances,
             every,
+            full_steps,
             out,
             json,
         } => {
             let b = mesh.load()?;
             let hash = store::model_hash(&b);
-            let s = load_snapshots(&snapshots, &hash)?;
-            std::fs::create_dir_all(&out)?;
-            let train = s.matrix(0, s.train_rows());
-            let maxr = ranks.iter().copied().max().unwrap_or(1);
-            let p = ocm_mor::pod::pod(
-                train.as_ref(),
-                &PodOptions {
-                    truncation: Truncation::Rank(maxr),
-                    ..PodOptions::default()
+            let s = store::load_snapshots(&snapshots, &hash)?;
+            std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+            let pb = bar(
+                1 + ranks.len() * tolerances.len(),
+                "full timing, rank x tolerance",
+            );
+            let c = ocm_mor::curve::sweep(
+                &b,
+                &s,
+                &CurveOptions {
+                    ranks,
+                    tolerances: tolerances.clone(),
+                    every,
+                    full_timing_steps: full_steps,
+                },
+                &mut |line| {
+                    pb.println(line);
+                    pb.inc(1);
                 },
             )?;
-            drop(train);
-            let full_basis = basis_from_pod(&p);
-            let pb = bar(ranks.len() * tolerances.len(), "rank x tolerance");
-            let mut rows = vec![];
-            let mut csv = String::from(
-                "rank,ecsw_tolerance,elements,tcp_rmse_mm,reduced_ms_per_step,full_ms_per_step,speedup\n",
-            );
-            for &r in &ranks {
-                let v = full_basis.columns(0, r).into_owned();
-                let gal = galerkin(&b, v.clone())?;
-                let tq = training_q(&s, &v, every);
-                for &tol in &tolerances {
-                    let rom = if tol > 0.0 {
-                        gal.hyper_reduce(&tq, tol)?.model
-                    } else {
-                        gal.clone()
-                    };
-                    let (err, sps) = match score(&b, &rom, &s) {
-                        Ok(x) => x,
-                        Err(e) => {
-                            eprintln!("rank {r}, tolerance {tol}: {e}");
-                            (f64::NAN, f64::NAN)
-                        }
-                    };
-                    let speedup = s.rec.seconds_per_step / sps;
-                    csv.push_str(&format!(
-                        "{r},{tol:e},{},{err:.6},{:.6},{:.6},{speedup:.3}\n",
-                        rom.elements.len(),
-                        sps * 1e3,
-                        s.rec.seconds_per_step * 1e3
-                    ));
-                    rows.push(serde_json::json!({ "rank": r, "ecsw_tolerance": tol, "elements": rom.elements.len(),
-                        "tcp_rmse_mm": err, "speedup": speedup, "reduced_ms_per_step": sps * 1e3 }));
-                    pb.inc(1);
-                }
-            }
             pb.finish_and_clear();
-            std::fs::write(out.join("curve.csv"), &csv)?;
+            let csv = c.csv();
+            let csv_path = out.join("curve.csv");
+            std::fs::write(&csv_path, &csv)
+                .with_context(|| format!("writing {}", csv_path.display()))?;
             let series = tolerances
                 .iter()
                 .map(|&tol| Series {
@@ -604,10 +529,11 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
                     } else {
                         "Galerkin (all elements)".into()
                     },
-                    points: rows
+                    points: c
+                        .points
                         .iter()
-                        .filter(|r| r["ecsw_tolerance"].as_f64() == Some(tol))
-                        .filter_map(|r| Some((r["speedup"].as_f64()?, r["tcp_rmse_mm"].as_f64()?)))
+                        .filter(|p| p.ecsw_tolerance == tol)
+                        .map(|p| (p.speedup, p.tcp_rmse_mm))
                         .filter(|(x, y)| x.is_finite() && y.is_finite())
                         .collect(),
                     dots: false,
@@ -615,18 +541,19 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
                 .collect();
             Chart {
                 title: "Reduced bellows model: held-out TCP error against speed-up per step",
-                x_label: "speed-up per time step vs full FEM (x)",
-                y_label: "TCP RMSE (mm)",
+                x_label: "speed-up per implicit step vs full FEM (median, x)",
+                y_label: "held-out TCP RMSE (mm)",
                 series,
                 equal_axes: false,
             }
             .write(&out, "curve")?;
             if json {
-                println!(
-                    "{}",
-                    serde_json::json!({ "points": rows, "csv": out.join("curve.csv") })
-                );
+                println!("{}", serde_json::to_string(&c)?);
             } else {
+                println!(
+                    "full FEM {:.1} ms/step (median of {} steps); POD {:.2} s",
+                    c.full_ms_per_step, c.full_steps_timed, c.pod_seconds
+                );
                 print!("{csv}");
                 println!("-> {}", out.display());
             }
@@ -695,7 +622,7 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
                         &spec,
                         i,
                         n,
-                        &mut |inputs| Ok(run::simulate_reduced(&r, &rp, inputs, drive_cfg.dt_s)?.0),
+                        &mut |inputs| Ok(run::simulate_reduced(&r, &rp, inputs, drive_cfg.dt_s)?.xs),
                         &mut progress,
                     )?
                 }

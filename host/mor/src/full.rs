@@ -71,6 +71,8 @@ pub struct Trajectory {
     pub xs: Vec<[f64; 2 * crate::xs::XS_DIM]>,
     /// Wall time of the steps, s.
     pub seconds: f64,
+    /// Wall time of each step, s.
+    pub step_seconds: Vec<f64>,
 }
 
 /// Runs the full model over `inputs` from rest.
@@ -87,11 +89,14 @@ pub fn simulate(
         displacements: vec![],
         xs: Vec::with_capacity(inputs.len()),
         seconds: 0.0,
+        step_seconds: Vec::with_capacity(inputs.len()),
     };
     for (k, inp) in inputs.iter().enumerate() {
         let t0 = std::time::Instant::now();
         sim.step(inp, dt_s)?;
-        out.seconds += t0.elapsed().as_secs_f64();
+        let dt = t0.elapsed().as_secs_f64();
+        out.seconds += dt;
+        out.step_seconds.push(dt);
         if keep_displacements {
             out.displacements.push(sim.displacement());
         }
@@ -99,4 +104,45 @@ pub fn simulate(
         on_step(k);
     }
     Ok(out)
+}
+
+/// Runs `sequences + held_out` seeded sequences of `steps` steps from rest and collects the
+/// snapshots (rows of displacements, 3N each, and X_S rows) with their record; `on_step` gets the
+/// number of steps done.
+pub fn record_snapshots(
+    bellows: &Bellows,
+    drive: &crate::drive::DriveConfig,
+    seed: u64,
+    sequences: usize,
+    held_out: usize,
+    steps: usize,
+    mut on_step: impl FnMut(usize),
+) -> Result<(crate::store::SnapshotRecord, Vec<f64>, Vec<f64>)> {
+    let total = sequences + held_out;
+    let dofs = 3 * bellows.model.num_nodes();
+    let (mut disp, mut xs, mut secs) = (
+        Vec::with_capacity(total * steps * dofs),
+        Vec::with_capacity(total * steps * 2 * crate::xs::XS_DIM),
+        0.0,
+    );
+    for k in 0..total {
+        let inputs = crate::drive::sequence(drive, seed, k as u64, steps);
+        let tr = simulate(bellows, &inputs, drive.dt_s, true, |j| {
+            on_step(k * steps + j + 1)
+        })?;
+        secs += tr.seconds;
+        disp.extend(tr.displacements.into_iter().flatten());
+        xs.extend(tr.xs.iter().flatten().copied());
+    }
+    let rec = crate::store::SnapshotRecord {
+        model_hash: crate::store::model_hash(bellows),
+        seed,
+        sequences,
+        held_out,
+        steps,
+        dt_s: drive.dt_s,
+        dofs,
+        seconds_per_step: secs / (total * steps).max(1) as f64,
+    };
+    Ok((rec, disp, xs))
 }

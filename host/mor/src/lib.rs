@@ -9,6 +9,7 @@
 
 #![allow(clippy::needless_range_loop)]
 
+pub mod curve;
 pub mod dataset;
 pub mod drive;
 pub mod error;

@@ -225,6 +225,77 @@ pub fn gaussian_matrix(rows: usize, cols: usize, seed: u64) -> Mat<f64> {
     Mat::<f64>::from_fn(rows, cols, |_, _| StandardNormal.sample(&mut rng))
 }
 
+/// The spectrum of a benchmark matrix: the measured singular values `measured` (descending,
+/// positive), continued to `len` values at the geometric decay rate of their last tenth (at
+/// least 10 values), so that the tail keeps the measured decay instead of dropping to zero.
+pub fn continued_spectrum(measured: &[f64], len: usize) -> Result<Vec<f64>> {
+    if measured.len() < 10 || measured.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+        return Err(MorError::Invalid(format!(
+            "need at least 10 positive finite singular values to continue a spectrum, got {}",
+            measured.len()
+        )));
+    }
+    let n = measured.len();
+    let span = (n / 10).max(9);
+    let rate = (measured[n - 1] / measured[n - 1 - span])
+        .powf(1.0 / span as f64)
+        .min(1.0);
+    let mut out: Vec<f64> = measured.iter().copied().take(len).collect();
+    while out.len() < len {
+        let last = out[out.len() - 1];
+        out.push(last * rate);
+    }
+    Ok(out)
+}
+
+/// A benchmark snapshot matrix with a prescribed spectrum: A = U diag(sigma) W^T (rows x cols)
+/// with U and W the orthonormalised columns of seeded Gaussian matrices (so the singular values
+/// of A are `sigma` to round-off), and `held` more columns U diag(sigma) W_h^T whose coefficients
+/// W_h are Gaussian with the variance 1/cols of W's entries (held-out snapshots of the same
+/// process). Returns (A, held-out columns).
+pub fn spectrum_matrix(
+    sigma: &[f64],
+    rows: usize,
+    cols: usize,
+    held: usize,
+    seed: u64,
+) -> Result<(Mat<f64>, Mat<f64>)> {
+    let k = sigma.len();
+    if k == 0 || k > rows.min(cols) {
+        return Err(MorError::Invalid(format!(
+            "{k} singular values do not fit a {rows} x {cols} matrix"
+        )));
+    }
+    let par = Par::rayon(0);
+    let u = gaussian_matrix(rows, k, seed).qr().compute_thin_Q();
+    let w = gaussian_matrix(cols, k, seed.wrapping_add(1))
+        .qr()
+        .compute_thin_Q();
+    let wh =
+        gaussian_matrix(held, k, seed.wrapping_add(2)) * faer::Scale(1.0 / (cols as f64).sqrt());
+    let us = Mat::<f64>::from_fn(rows, k, |i, j| u[(i, j)] * sigma[j]);
+    drop(u);
+    let mut a = Mat::<f64>::zeros(rows, cols);
+    matmul(
+        a.as_mut(),
+        Accum::Replace,
+        us.as_ref(),
+        w.transpose(),
+        1.0,
+        par,
+    );
+    let mut h = Mat::<f64>::zeros(rows, held);
+    matmul(
+        h.as_mut(),
+        Accum::Replace,
+        us.as_ref(),
+        wh.transpose(),
+        1.0,
+        par,
+    );
+    Ok((a, h))
+}
+
 /// Largest principal angle between the column spaces of two orthonormal bases, radians.
 pub fn subspace_angle(u: MatRef<'_, f64>, w: MatRef<'_, f64>) -> f64 {
     // sin(theta_max) = ||(I - U U^T) W||_2.

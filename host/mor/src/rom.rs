@@ -21,6 +21,16 @@ use ocm_fem::model::Model;
 use ocm_fem::solve::dynamics::Integrator;
 use serde::Serialize;
 
+/// Absolute Newton increment below which a reduced step has converged, in the units of q (m for
+/// an orthonormal basis of displacements): the full solver's `dx_tol`.
+const DQ_TOL: f64 = 1e-12;
+
+/// Newton iterations of a reduced step before it is halved.
+const MAX_ITERATIONS: usize = 60;
+
+/// Default of [`ReducedModel::damping_tangent_age`].
+pub const DEFAULT_DAMPING_TANGENT_AGE: usize = 10;
+
 /// One element of the reduced force sum.
 #[derive(Debug, Clone)]
 pub struct ReducedElement {
@@ -37,12 +47,12 @@ pub struct ReducedElement {
 }
 
 /// The projected follower-pressure load of one cavity per pascal: G(q)_k = g0_k + L_kj q_j +
-/// Q_kij q_i q_j.
+/// 1/2 S_kij q_i q_j with S_k symmetric (S_kij = Q_kij + Q_kji), so that dG_k/dq = L_k + S_k q.
 #[derive(Debug, Clone)]
 struct PressureForm {
     g0: Vec<f64>,
     lin: Vec<f64>,
-    quad: Vec<f64>,
+    sym: Vec<f64>,
 }
 
 /// What the reduced model evaluates at a configuration.
@@ -99,6 +109,10 @@ pub struct ReducedModel {
     pub beta: f64,
     /// Relative residual tolerance of the reduced Newton.
     pub rtol: f64,
+    /// Steps a projected tangent serves the Rayleigh stiffness damping before it is refreshed at
+    /// a step start (1: refreshed at every step start, exactly as the full solver; larger values
+    /// lag the damping tangent by up to this many steps, see the crate README).
+    pub damping_tangent_age: usize,
 }
 
 /// Elements that carry strain: all but those whose four nodes lie on one rigid body.
@@ -215,7 +229,8 @@ impl ReducedModel {
             material: model.material,
             alpha: model.rayleigh_alpha,
             beta: model.rayleigh_beta,
-            rtol: 1e-8,
+            rtol: 1e-6,
+            damping_tangent_age: DEFAULT_DAMPING_TANGENT_AGE,
         })
     }
 
@@ -291,29 +306,23 @@ impl ReducedModel {
         let r = self.rank();
         let mut g = &self.gravity + &self.tip * DVector::from_column_slice(&input.tip_force_n);
         let mut jac = want_jac.then(|| DMatrix::zeros(r, r));
+        let mut w = vec![0.0; r];
         for (c, form) in self.pressure.iter().enumerate() {
             let p = input.pressure_kpa.get(c).copied().unwrap_or(0.0) * 1e3;
             if p == 0.0 {
                 continue;
             }
             for kk in 0..r {
-                let mut val = form.g0[kk];
-                for j in 0..r {
-                    val += form.lin[kk * r + j] * q[j];
+                let sk = &form.sym[kk * r * r..(kk + 1) * r * r];
+                for (j, wj) in w.iter_mut().enumerate() {
+                    *wj = (0..r).map(|i| sk[j * r + i] * q[i]).sum();
                 }
-                let qk = &form.quad[kk * r * r..(kk + 1) * r * r];
-                for i in 0..r {
-                    let s: f64 = (0..r).map(|j| qk[i * r + j] * q[j]).sum();
-                    val += q[i] * s;
-                }
+                let lk = &form.lin[kk * r..(kk + 1) * r];
+                let val = form.g0[kk] + (0..r).map(|j| (lk[j] + 0.5 * w[j]) * q[j]).sum::<f64>();
                 g[kk] += p * val;
                 if let Some(jm) = jac.as_mut() {
                     for j in 0..r {
-                        let mut d = form.lin[kk * r + j];
-                        for i in 0..r {
-                            d += (qk[i * r + j] + qk[j * r + i]) * q[i];
-                        }
-                        jm[(kk, j)] += p * d;
+                        jm[(kk, j)] += p * (lk[j] + w[j]);
                     }
                 }
             }
@@ -385,7 +394,8 @@ impl ReducedModel {
         Ok(ke + self.internal(&s.q, false)?.energy)
     }
 
-    /// One implicit step of `h` seconds under `input`; halves the step (up to 4 times) when Newton fails.
+    /// One implicit step of `h` seconds under `input` with a fresh [`Stepper`] (no iteration
+    /// matrix carried over); halves the step (up to 4 times) when Newton fails.
     pub fn step(
         &self,
         s: &mut ReducedState,
@@ -393,109 +403,7 @@ impl ReducedModel {
         h: f64,
         integrator: Integrator,
     ) -> Result<ReducedStepReport> {
-        let mut rep = ReducedStepReport::default();
-        self.step_cut(s, input, h, integrator, 0, &mut rep)?;
-        Ok(rep)
-    }
-
-    fn step_cut(
-        &self,
-        s: &mut ReducedState,
-        input: &Input,
-        h: f64,
-        integrator: Integrator,
-        depth: usize,
-        rep: &mut ReducedStepReport,
-    ) -> Result<()> {
-        let saved = s.clone();
-        match self.substep(s, input, h, integrator, rep) {
-            Ok(()) => Ok(()),
-            Err(e) if depth < 4 => {
-                *s = saved;
-                let _ = e;
-                self.step_cut(s, input, h / 2.0, integrator, depth + 1, rep)?;
-                self.step_cut(s, input, h / 2.0, integrator, depth + 1, rep)
-            }
-            Err(e) => Err(e),
-        }
-    }
-
-    fn substep(
-        &self,
-        s: &mut ReducedState,
-        input: &Input,
-        h: f64,
-        integrator: Integrator,
-        rep: &mut ReducedStepReport,
-    ) -> Result<()> {
-        let (ca, cv) = match integrator {
-            Integrator::ImplicitEuler => (1.0 / (h * h), 1.0 / h),
-            Integrator::Newmark { beta, gamma } => (1.0 / (beta * h * h), gamma / (beta * h)),
-        };
-        let kin = |q: &DVector<f64>| -> (DVector<f64>, DVector<f64>) {
-            let dq = q - &s.q;
-            match integrator {
-                Integrator::ImplicitEuler => (&dq * ca - &s.v / h, &dq / h),
-                Integrator::Newmark { beta, gamma } => {
-                    let a = &dq * ca - &s.v / (beta * h) - &s.a * (0.5 / beta - 1.0);
-                    let v = &s.v + (&s.a * (1.0 - gamma) + &a * gamma) * h;
-                    (a, v)
-                }
-            }
-        };
-        // Rayleigh damping with the tangent (internal and pressure) frozen at the step start.
-        let ev_n = self.internal(&s.q, true)?;
-        rep.tangents += 1;
-        let (_, dg_n) = self.external(&s.q, input, true);
-        let k_n = ev_n.k.clone().unwrap_or_else(|| DMatrix::zeros(0, 0))
-            - dg_n.unwrap_or_else(|| DMatrix::zeros(0, 0));
-        let damp = &self.mass * self.alpha + &k_n * self.beta;
-        let jac_of = |k: &DMatrix<f64>| &self.mass * ca + &damp * cv + k;
-        let mut lu = jac_of(&k_n).lu();
-        let mut q = &s.q + &s.v * h;
-        let mut last = f64::INFINITY;
-        for it in 0..30 {
-            let ev = self.internal(&q, false)?;
-            let (g, _) = self.external(&q, input, false);
-            let (a, v) = kin(&q);
-            let ma = &self.mass * &a;
-            let res = &ma + &damp * &v + &ev.f_int - &g;
-            let scale = ev.f_int.norm().max(g.norm()).max(ma.norm());
-            let rn = res.norm();
-            if rn <= self.rtol * scale || rn == 0.0 {
-                (s.a, s.v) = (a, v);
-                s.q = q;
-                s.t += h;
-                return Ok(());
-            }
-            if it > 0 && rn > 0.5 * last {
-                // Slow contraction: refresh the iteration matrix at the current point.
-                let evk = self.internal(&q, true)?;
-                rep.tangents += 1;
-                let (_, dg) = self.external(&q, input, true);
-                let kq = evk.k.unwrap_or_else(|| DMatrix::zeros(0, 0))
-                    - dg.unwrap_or_else(|| DMatrix::zeros(0, 0));
-                lu = jac_of(&kq).lu();
-            }
-            last = rn;
-            rep.iterations += 1;
-            let dq = lu
-                .solve(&(-res))
-                .ok_or_else(|| MorError::Solve("singular iteration matrix".into()))?;
-            q += &dq;
-            if dq.norm() <= 1e-13 * q.norm() {
-                // Converged to round-off: the tolerance asked for more than f64 holds.
-                let (a, v) = kin(&q);
-                (s.a, s.v) = (a, v);
-                s.q = q;
-                s.t += h;
-                return Ok(());
-            }
-        }
-        Err(MorError::Solve(format!(
-            "dynamic Newton did not converge at t = {:.4} s",
-            s.t
-        )))
+        Stepper::new(self, integrator).step(s, input, h)
     }
 
     /// Training data of ECSW for configurations `qs`: per configuration the element contributions
@@ -544,6 +452,7 @@ impl ReducedModel {
             alpha: self.alpha,
             beta: self.beta,
             rtol: self.rtol,
+            damping_tangent_age: self.damping_tangent_age,
         }
     }
 
@@ -685,5 +594,473 @@ fn pressure_form(model: &Model, basis: &DMatrix<f64>, tris: &[[usize; 3]]) -> Pr
             }
         }
     }
-    PressureForm { g0, lin, quad }
+    // Symmetrise in (i, j): the quadratic form is unchanged and its gradient is S q.
+    let mut sym = vec![0.0; r * r * r];
+    for k in 0..r {
+        let (qk, sk) = (
+            &quad[k * r * r..(k + 1) * r * r],
+            &mut sym[k * r * r..(k + 1) * r * r],
+        );
+        for i in 0..r {
+            for j in 0..r {
+                sk[i * r + j] = qk[i * r + j] + qk[j * r + i];
+            }
+        }
+    }
+    PressureForm { g0, lin, sym }
+}
+
+/// Implicit steps of a reduced model with their working memory: the projected tangent that serves
+/// the Rayleigh stiffness damping, the factorised iteration matrix (kept across steps while it
+/// contracts the residual: modified Newton, as the full solver) and the basis rows of the sampled
+/// elements stacked for matrix-vector products.
+pub struct Stepper<'a> {
+    rom: &'a ReducedModel,
+    integrator: Integrator,
+    /// Basis rows of the sampled elements, 12 n_e x r (element c: rows 12c..12c+12).
+    vall: faer::Mat<f64>,
+    /// Weighted element forces (or tangent times basis), 12 n_e x r scratch.
+    kv: faer::Mat<f64>,
+    /// Element displacements V q and weighted element forces, 12 n_e.
+    u: faer::Mat<f64>,
+    fe: faer::Mat<f64>,
+    /// LU of the iteration matrix and the (c_a, c_v) it was made for.
+    lu: Option<(nalgebra::LU<f64, nalgebra::Dyn, nalgebra::Dyn>, f64, f64)>,
+    /// K_r - dg/dq of the latest tangent evaluation, and of the one the damping of this step uses.
+    k_latest: DMatrix<f64>,
+    k_damp: DMatrix<f64>,
+    /// Steps since `k_damp` was taken; usize::MAX when there is none.
+    damp_age: usize,
+    /// Iterations of the last step.
+    last_iterations: usize,
+    /// The pressure form of this step's pressures: constant, linear, symmetric quadratic part.
+    pg0: Vec<f64>,
+    plin: Vec<f64>,
+    psym: Vec<f64>,
+    f: Vec<f64>,
+    g: Vec<f64>,
+    jg: Vec<f64>,
+    w: Vec<f64>,
+    /// Iterations and tangent projections so far.
+    pub report: ReducedStepReport,
+}
+
+impl<'a> Stepper<'a> {
+    /// A stepper of `rom` with `integrator`.
+    pub fn new(rom: &'a ReducedModel, integrator: Integrator) -> Self {
+        let r = rom.rank();
+        let ne = rom.elements.len();
+        let vall =
+            faer::Mat::<f64>::from_fn(12 * ne, r, |i, k| rom.elements[i / 12].v[k * 12 + i % 12]);
+        Stepper {
+            rom,
+            integrator,
+            vall,
+            kv: faer::Mat::zeros(12 * ne, r),
+            u: faer::Mat::zeros(12 * ne, 1),
+            fe: faer::Mat::zeros(12 * ne, 1),
+            lu: None,
+            k_latest: DMatrix::zeros(r, r),
+            k_damp: DMatrix::zeros(r, r),
+            damp_age: usize::MAX,
+            last_iterations: 0,
+            pg0: vec![0.0; r],
+            plin: vec![0.0; r * r],
+            psym: vec![0.0; r * r * r],
+            f: vec![0.0; r],
+            g: vec![0.0; r],
+            jg: vec![0.0; r * r],
+            w: vec![0.0; r],
+            report: ReducedStepReport::default(),
+        }
+    }
+
+    /// One implicit step of `h` seconds under `input`; halves the step (up to 4 times) when
+    /// Newton fails. Returns the iterations and tangent projections of this step.
+    pub fn step(
+        &mut self,
+        s: &mut ReducedState,
+        input: &Input,
+        h: f64,
+    ) -> Result<ReducedStepReport> {
+        let before = self.report;
+        self.set_pressure(input);
+        self.step_cut(s, input, h, 0)?;
+        Ok(ReducedStepReport {
+            iterations: self.report.iterations - before.iterations,
+            tangents: self.report.tangents - before.tangents,
+        })
+    }
+
+    fn step_cut(
+        &mut self,
+        s: &mut ReducedState,
+        input: &Input,
+        h: f64,
+        depth: usize,
+    ) -> Result<()> {
+        let saved = s.clone();
+        match self.substep(s, input, h) {
+            Ok(()) => Ok(()),
+            Err(_) if depth < 4 => {
+                *s = saved;
+                // Start the halves from fresh tangents.
+                self.lu = None;
+                self.damp_age = usize::MAX;
+                self.step_cut(s, input, h / 2.0, depth + 1)?;
+                self.step_cut(s, input, h / 2.0, depth + 1)
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Combines the cavities' pressure forms for this step's pressures (held over the step).
+    fn set_pressure(&mut self, input: &Input) {
+        self.pg0.fill(0.0);
+        self.plin.fill(0.0);
+        self.psym.fill(0.0);
+        for (c, form) in self.rom.pressure.iter().enumerate() {
+            let p = input.pressure_kpa.get(c).copied().unwrap_or(0.0) * 1e3;
+            if p == 0.0 {
+                continue;
+            }
+            for (a, b) in self.pg0.iter_mut().zip(&form.g0) {
+                *a += p * b;
+            }
+            for (a, b) in self.plin.iter_mut().zip(&form.lin) {
+                *a += p * b;
+            }
+            for (a, b) in self.psym.iter_mut().zip(&form.sym) {
+                *a += p * b;
+            }
+        }
+    }
+
+    /// External load g(q) into `self.g` and its Jacobian into `self.jg` (row-major).
+    fn external(&mut self, q: &[f64], tip: &[f64; 3]) {
+        let rom = self.rom;
+        let r = rom.rank();
+        for k in 0..r {
+            let sk = &self.psym[k * r * r..(k + 1) * r * r];
+            for j in 0..r {
+                let row = &sk[j * r..(j + 1) * r];
+                self.w[j] = row.iter().zip(q).map(|(a, b)| a * b).sum();
+            }
+            let lk = &self.plin[k * r..(k + 1) * r];
+            let mut val = self.pg0[k] + rom.gravity[k];
+            for d in 0..3 {
+                val += rom.tip[(k, d)] * tip[d];
+            }
+            for j in 0..r {
+                val += (lk[j] + 0.5 * self.w[j]) * q[j];
+                self.jg[k * r + j] = lk[j] + self.w[j];
+            }
+            self.g[k] = val;
+        }
+    }
+
+    /// Element sweep at `q`: the internal force sum_e w_e V_e^T f_e into `self.f`; with
+    /// `tangent`, also K_r(q) - dg/dq(q) into `self.k_latest` (`self.jg` must be at q).
+    fn sweep(&mut self, q: &[f64], tangent: bool) -> Result<()> {
+        use faer::linalg::matmul::matmul;
+        use faer::{Accum, Par};
+        let rom = self.rom;
+        let r = rom.rank();
+        // Plain column sweeps: faer's kernels carry more overhead than a 12 n_e x r product costs.
+        {
+            let u = self.u.col_as_slice_mut(0);
+            u.fill(0.0);
+            for (k, &qk) in q.iter().enumerate() {
+                for (ui, vi) in u.iter_mut().zip(self.vall.col_as_slice(k)) {
+                    *ui += vi * qk;
+                }
+            }
+        }
+        for (c, el) in rom.elements.iter().enumerate() {
+            let pos: [Vector3<f64>; 4] = std::array::from_fn(|a| {
+                let b = 12 * c + 3 * a;
+                el.rest[a] + Vector3::new(self.u[(b, 0)], self.u[(b + 1, 0)], self.u[(b + 2, 0)])
+            });
+            let ev = element::evaluate(
+                el.element,
+                &el.geom,
+                &rom.material,
+                el.k0.as_ref(),
+                el.scale,
+                &pos,
+                tangent,
+            )?;
+            let w = el.weight;
+            for i in 0..12 {
+                self.fe[(12 * c + i, 0)] = w * ev.force[i];
+            }
+            if let Some(ke) = ev.stiffness.as_ref() {
+                // Rows 12c.. of K V: w K_e V_e (K_e column-major, inner loop over rows).
+                let ks = ke.as_slice();
+                for k in 0..r {
+                    let col = &el.v[k * 12..k * 12 + 12];
+                    let mut acc = [0.0; 12];
+                    for m in 0..12 {
+                        let cm = w * col[m];
+                        for (a, kk) in acc.iter_mut().zip(&ks[m * 12..m * 12 + 12]) {
+                            *a += kk * cm;
+                        }
+                    }
+                    self.kv.col_as_slice_mut(k)[12 * c..12 * c + 12].copy_from_slice(&acc);
+                }
+            }
+        }
+        let fe = self.fe.col_as_slice(0);
+        for k in 0..r {
+            self.f[k] = self
+                .vall
+                .col_as_slice(k)
+                .iter()
+                .zip(fe)
+                .map(|(a, b)| a * b)
+                .sum();
+        }
+        if tangent {
+            let mut k = faer::Mat::<f64>::zeros(r, r);
+            matmul(
+                k.as_mut(),
+                Accum::Replace,
+                self.vall.transpose(),
+                self.kv.as_ref(),
+                1.0,
+                Par::Seq,
+            );
+            for i in 0..r {
+                for j in 0..r {
+                    self.k_latest[(i, j)] = k[(i, j)] - self.jg[i * r + j];
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Factorises J = (c_a + c_v alpha) M + (1 + c_v beta) (K - dg/dq) from `self.k_latest`.
+    /// The damping's tangent is taken where the stiffness is: J only steers the iteration.
+    fn factorise(&mut self, ca: f64, cv: f64) {
+        let rom = self.rom;
+        let r = rom.rank();
+        let (cm, ck) = (ca + cv * rom.alpha, 1.0 + cv * rom.beta);
+        let j = DMatrix::from_fn(r, r, |i, k| {
+            cm * rom.mass[(i, k)] + ck * self.k_latest[(i, k)]
+        });
+        self.lu = Some((j.lu(), ca, cv));
+        self.report.tangents += 1;
+    }
+
+    fn substep(&mut self, s: &mut ReducedState, input: &Input, h: f64) -> Result<()> {
+        let rom = self.rom;
+        let r = rom.rank();
+        let integrator = self.integrator;
+        let tip = input.tip_force_n;
+        let (ca, cv) = match integrator {
+            Integrator::ImplicitEuler => (1.0 / (h * h), 1.0 / h),
+            Integrator::Newmark { beta, gamma } => (1.0 / (beta * h * h), gamma / (beta * h)),
+        };
+        if self
+            .lu
+            .as_ref()
+            .is_some_and(|(_, a, b)| (*a, *b) != (ca, cv))
+        {
+            self.lu = None;
+        }
+        // The damping tangent: refreshed at q_n when there is none, when it is too old, or when
+        // the last step needed many iterations (the configuration moved away from it).
+        let stale = self.damp_age >= rom.damping_tangent_age.max(1) || self.last_iterations > 3;
+        if self.damp_age == usize::MAX || stale {
+            self.external(s.q.as_slice(), &tip);
+            self.sweep(s.q.as_slice(), true)?;
+            self.k_damp.copy_from(&self.k_latest);
+            self.damp_age = 0;
+            self.factorise(ca, cv);
+        }
+        self.damp_age += 1;
+        let qn = s.q.as_slice().to_vec();
+        let (vn, an) = (s.v.as_slice().to_vec(), s.a.as_slice().to_vec());
+        let kin = |q: &[f64], a: &mut [f64], v: &mut [f64]| {
+            for i in 0..q.len() {
+                let dq = q[i] - qn[i];
+                match integrator {
+                    Integrator::ImplicitEuler => {
+                        a[i] = dq * ca - vn[i] / h;
+                        v[i] = dq / h;
+                    }
+                    Integrator::Newmark { beta, gamma } => {
+                        a[i] = dq * ca - vn[i] / (beta * h) - an[i] * (0.5 / beta - 1.0);
+                        v[i] = vn[i] + (an[i] * (1.0 - gamma) + a[i] * gamma) * h;
+                    }
+                }
+            }
+        };
+        // Predictor: constant velocity.
+        let mut q: Vec<f64> = (0..r).map(|i| qn[i] + h * vn[i]).collect();
+        let (mut a, mut v) = (vec![0.0; r], vec![0.0; r]);
+        let mut res = vec![0.0; r];
+        let mut last = f64::INFINITY;
+        let mut fresh = false;
+        let mut iterations = 0;
+        for it in 0..MAX_ITERATIONS {
+            kin(&q, &mut a, &mut v);
+            self.external(&q, &tip);
+            self.sweep(&q, false)?;
+            // Residual M a + (alpha M + beta K_d) v + f(q) - g(q).
+            let (mut n_ma, mut n_f, mut n_g) = (0.0f64, 0.0f64, 0.0f64);
+            for i in 0..r {
+                let (mut ma, mut dv) = (0.0, 0.0);
+                for k in 0..r {
+                    ma += rom.mass[(i, k)] * a[k];
+                    dv += (rom.alpha * rom.mass[(i, k)] + rom.beta * self.k_damp[(i, k)]) * v[k];
+                }
+                res[i] = ma + dv + self.f[i] - self.g[i];
+                n_ma += ma * ma;
+                n_f += self.f[i] * self.f[i];
+                n_g += self.g[i] * self.g[i];
+            }
+            let scale = n_f.max(n_g).max(n_ma).sqrt();
+            let rn = res.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if rn <= rom.rtol * scale || rn == 0.0 {
+                s.q.copy_from_slice(&q);
+                s.v.copy_from_slice(&v);
+                s.a.copy_from_slice(&a);
+                s.t += h;
+                self.last_iterations = iterations;
+                return Ok(());
+            }
+            if self.lu.is_none() || (it > 0 && rn > 0.5 * last && !fresh) {
+                // No matrix, or slow contraction: refresh the iteration matrix here.
+                self.sweep(&q, true)?;
+                self.factorise(ca, cv);
+                fresh = true;
+            } else {
+                fresh = false;
+            }
+            last = rn;
+            iterations += 1;
+            self.report.iterations += 1;
+            let Some((lu, _, _)) = self.lu.as_ref() else {
+                return Err(MorError::Solve("no iteration matrix".into()));
+            };
+            let mut dq = DVector::from_iterator(r, res.iter().map(|x| -x));
+            if !lu.solve_mut(&mut dq) {
+                return Err(MorError::Solve("singular iteration matrix".into()));
+            }
+            let (mut dn, mut qnorm) = (0.0, 0.0);
+            for i in 0..r {
+                q[i] += dq[i];
+                dn += dq[i] * dq[i];
+                qnorm += q[i] * q[i];
+            }
+            // Converged to round-off (the tolerance asked for more than f64 holds), or the update
+            // is below the full solver's absolute increment tolerance.
+            if dn.sqrt() <= (1e-13 * qnorm.sqrt()).max(DQ_TOL) {
+                kin(&q, &mut a, &mut v);
+                s.q.copy_from_slice(&q);
+                s.v.copy_from_slice(&v);
+                s.a.copy_from_slice(&a);
+                s.t += h;
+                self.last_iterations = iterations;
+                return Ok(());
+            }
+        }
+        Err(MorError::Solve(format!(
+            "dynamic Newton did not converge at t = {:.4} s",
+            s.t
+        )))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ocm_fem::material::Material;
+    use ocm_fem::mesh::generate;
+
+    /// The stepper's stacked sweep gives the force and tangent of [`ReducedModel::internal`].
+    #[test]
+    fn stepper_sweep_matches_the_reference_evaluation() {
+        let mesh = generate::box_mesh([3, 2, 2], [0.06, 0.02, 0.02]);
+        let mut model = Model::new(&mesh, Material::neo_hookean_bulk(2e5, 0.4), 1040.0).unwrap();
+        model.fix_plane([0.0; 3], [1.0, 0.0, 0.0], 1e-9);
+        let on_top = |i: usize| (model.rest[i].z - 0.02).abs() < 1e-12;
+        let mut tris = vec![];
+        for g in &model.elements {
+            for skip in 0..4 {
+                let f: Vec<usize> = (0..4).filter(|&k| k != skip).map(|k| g.nodes[k]).collect();
+                if f.iter().all(|&i| on_top(i)) {
+                    tris.push([f[0], f[1], f[2]]);
+                }
+            }
+        }
+        model.add_pressure_surface("top", tris).unwrap();
+        let n3 = 3 * model.num_nodes();
+        let r = 5;
+        let basis = DMatrix::from_fn(n3, r, |i, k| {
+            if model.fixed[i] {
+                0.0
+            } else {
+                ((i * 7 + k * 13) % 11) as f64 * 1e-3 - 5e-3
+            }
+        });
+        let rom = ReducedModel::galerkin(&model, basis, &[model.num_nodes() - 1]).unwrap();
+        let q = DVector::from_fn(r, |i, _| 0.3 - 0.1 * i as f64);
+        let reference = rom.internal(&q, true).unwrap();
+        let mut st = Stepper::new(&rom, Integrator::ImplicitEuler);
+        let input = Input {
+            pressure_kpa: [2.0, 0.0, 0.0],
+            tip_force_n: [0.1, 0.0, -0.2],
+        };
+        st.set_pressure(&input);
+        st.external(q.as_slice(), &input.tip_force_n);
+        let (g, jg) = rom.external(&q, &input, true);
+        let jg = jg.unwrap();
+        for i in 0..r {
+            assert!((st.g[i] - g[i]).abs() <= 1e-10 * g.norm(), "g[{i}]");
+            for j in 0..r {
+                assert!(
+                    (st.jg[i * r + j] - jg[(i, j)]).abs() <= 1e-10 * jg.norm(),
+                    "jg[{i},{j}]"
+                );
+            }
+        }
+        let kref = reference.k.clone().unwrap() - &jg;
+        // k_latest is the derivative of f - g (central differences).
+        st.sweep(q.as_slice(), true).unwrap();
+        let kl = st.k_latest.clone();
+        let eps = 1e-7;
+        for j in 0..r {
+            let mut fd = [vec![0.0; r], vec![0.0; r]];
+            for (side, sign) in [(0, 1.0), (1, -1.0)] {
+                let mut qq = q.clone();
+                qq[j] += sign * eps;
+                st.external(qq.as_slice(), &input.tip_force_n);
+                st.sweep(qq.as_slice(), false).unwrap();
+                fd[side] = (0..r).map(|i| st.f[i] - st.g[i]).collect();
+            }
+            for i in 0..r {
+                let d = (fd[0][i] - fd[1][i]) / (2.0 * eps);
+                assert!(
+                    (d - kl[(i, j)]).abs() <= 1e-5 * kl.norm(),
+                    "dR[{i}]/dq[{j}]: {d} vs {}",
+                    kl[(i, j)]
+                );
+            }
+        }
+        st.external(q.as_slice(), &input.tip_force_n);
+        st.sweep(q.as_slice(), true).unwrap();
+        for i in 0..r {
+            assert!((st.f[i] - reference.f_int[i]).abs() <= 1e-10 * reference.f_int.norm());
+            for j in 0..r {
+                assert!(
+                    (st.k_latest[(i, j)] - kref[(i, j)]).abs() <= 1e-10 * kref.norm(),
+                    "K[{i},{j}] {} vs {}",
+                    st.k_latest[(i, j)],
+                    kref[(i, j)]
+                );
+            }
+        }
+    }
 }

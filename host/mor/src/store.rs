@@ -247,3 +247,138 @@ impl ReducedProbe {
         self.probe.compact_state(&|i| at(&u, i), &|i| at(&w, i))
     }
 }
+
+/// What `ocm mor snapshots` stored beside `displacements.npy` and `xs.npy`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SnapshotRecord {
+    /// Model hash.
+    pub model_hash: String,
+    /// Seed of the inputs.
+    pub seed: u64,
+    /// Training sequences (the first ones).
+    pub sequences: usize,
+    /// Held-out sequences (after the training ones, never used to fit).
+    pub held_out: usize,
+    /// Steps per sequence.
+    pub steps: usize,
+    /// Time step, s.
+    pub dt_s: f64,
+    /// Degrees of freedom (3N).
+    pub dofs: usize,
+    /// Full-model wall time per step, s (mean over all sequences).
+    pub seconds_per_step: f64,
+}
+
+/// Snapshots on disk: the record, displacements (M x 3N, m) and X_S with its rate (M x 16).
+#[derive(Debug, Clone)]
+pub struct Snapshots {
+    /// The record.
+    pub rec: SnapshotRecord,
+    /// Rows = snapshots (M x 3N), m.
+    pub disp: npy::Array2,
+    /// Rows = X_S and rate per snapshot.
+    pub xs: npy::Array2,
+}
+
+/// Writes `S/displacements.npy`, `S/xs.npy` and `S/snapshots.json`.
+pub fn save_snapshots(dir: &Path, rec: &SnapshotRecord, disp: &[f64], xs: &[f64]) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| MorError::io(dir, e))?;
+    let m = (rec.sequences + rec.held_out) * rec.steps;
+    npy::write_f64_2d_path(dir.join("displacements.npy"), disp, m, rec.dofs)?;
+    npy::write_f64_2d_path(dir.join("xs.npy"), xs, m, 2 * XS_DIM)?;
+    let p = dir.join("snapshots.json");
+    std::fs::write(
+        &p,
+        serde_json::to_string_pretty(rec).map_err(|e| MorError::Invalid(e.to_string()))?,
+    )
+    .map_err(|e| MorError::io(&p, e))
+}
+
+/// Reads snapshots of the model with `model_hash`; checks the record against the arrays.
+pub fn load_snapshots(dir: &Path, model_hash: &str) -> Result<Snapshots> {
+    let jp = dir.join("snapshots.json");
+    let text = std::fs::read_to_string(&jp).map_err(|e| MorError::io(&jp, e))?;
+    let rec: SnapshotRecord = serde_json::from_str(&text)
+        .map_err(|e| MorError::file(&jp, format!("not a snapshot record: {e}")))?;
+    if rec.model_hash != model_hash {
+        return Err(MorError::file(
+            &jp,
+            format!(
+                "snapshots of model {}, not of this model {model_hash}",
+                rec.model_hash
+            ),
+        ));
+    }
+    let m = (rec.sequences + rec.held_out) * rec.steps;
+    let dp = dir.join("displacements.npy");
+    let disp = npy::read_f64_2d(&dp)?;
+    if (disp.rows, disp.cols) != (m, rec.dofs) {
+        return Err(MorError::file(
+            &dp,
+            format!(
+                "shape ({}, {}) but snapshots.json implies ({m}, {})",
+                disp.rows, disp.cols, rec.dofs
+            ),
+        ));
+    }
+    let xp = dir.join("xs.npy");
+    let xs = npy::read_f64_2d(&xp)?;
+    if (xs.rows, xs.cols) != (m, 2 * XS_DIM) {
+        return Err(MorError::file(
+            &xp,
+            format!(
+                "shape ({}, {}) but expected ({m}, {})",
+                xs.rows,
+                xs.cols,
+                2 * XS_DIM
+            ),
+        ));
+    }
+    Ok(Snapshots { rec, disp, xs })
+}
+
+impl Snapshots {
+    /// Rows of the training sequences.
+    pub fn train_rows(&self) -> usize {
+        self.rec.sequences * self.rec.steps
+    }
+
+    /// Column-major 3N x (b - a) matrix of snapshot rows a..b.
+    pub fn matrix(&self, a: usize, b: usize) -> faer::Mat<f64> {
+        let n = self.disp.cols;
+        faer::Mat::<f64>::from_fn(n, b - a, |i, j| self.disp.data[(a + j) * n + i])
+    }
+
+    /// X_S row `k`.
+    pub fn xs_row(&self, k: usize) -> [f64; 2 * XS_DIM] {
+        let mut o = [0.0; 2 * XS_DIM];
+        o.copy_from_slice(&self.xs.data[k * 2 * XS_DIM..(k + 1) * 2 * XS_DIM]);
+        o
+    }
+
+    /// Held-out sequences: (sequence index, inputs, full-model X_S rows).
+    pub fn held_out(
+        &self,
+        drive: &crate::drive::DriveConfig,
+    ) -> Vec<(usize, Vec<crate::drive::Input>, Vec<[f64; 2 * XS_DIM]>)> {
+        let r = &self.rec;
+        (r.sequences..r.sequences + r.held_out)
+            .map(|k| {
+                let inputs = crate::drive::sequence(drive, r.seed, k as u64, r.steps);
+                let xs = (0..r.steps).map(|j| self.xs_row(k * r.steps + j)).collect();
+                (k, inputs, xs)
+            })
+            .collect()
+    }
+
+    /// Reduced coordinates V^T u of every `every`-th training snapshot (ECSW training set).
+    pub fn training_q(&self, basis: &DMatrix<f64>, every: usize) -> Vec<DVector<f64>> {
+        let n = self.disp.cols;
+        (0..self.train_rows())
+            .step_by(every.max(1))
+            .map(|k| {
+                basis.transpose() * DVector::from_column_slice(&self.disp.data[k * n..(k + 1) * n])
+            })
+            .collect()
+    }
+}
