@@ -8,6 +8,7 @@ mod cmd_learn;
 mod cmd_lut;
 mod cmd_model;
 mod cmd_mor;
+mod cmd_surrogate;
 mod cmd_tactile;
 mod cmd_track;
 mod plot;
@@ -39,6 +40,9 @@ enum Command {
     /// Model-order reduction of the bellows FEM: snapshots, POD, reduced model, X_S datasets.
     #[command(subcommand)]
     Mor(cmd_mor::MorCommand),
+    /// Rigid-link surrogate of the bellows: geometry from FEM nodes, URDF, actuation map, bench.
+    #[command(subcommand)]
+    Surrogate(cmd_surrogate::SurrogateCommand),
     /// Learned dynamics of the bellows manipulator: forward Transformer-PINN and inverse model.
     #[command(subcommand)]
     Learn(cmd_learn::LearnCommand),
@@ -56,6 +60,7 @@ fn main() -> anyhow::Result<()> {
         Command::Fem(cmd) => cmd_fem::run(cmd),
         Command::Ident(args) => cmd_ident::run(args),
         Command::Mor(cmd) => cmd_mor::run(cmd),
+        Command::Surrogate(cmd) => cmd_surrogate::run(cmd),
         Command::Learn(cmd) => cmd_learn::run(cmd),
         Command::Tactile(cmd) => cmd_tactile::run(cmd),
     }

@@ -1,0 +1,251 @@
+//! Aligning the actuation spaces (Ch.4.7, Algorithm 1, eq 4.25-4.27, App. D): bounded L-BFGS-B
+//! postures matching the FEM TCP, the regression f_SP from pressures to postures and its inverse.
+//!
+//! The optimiser works in the increment coordinates of [`Limits::from_increments`], in which the
+//! grouped constraints of eq 4.23 are box bounds: every iterate, and so every optimised posture,
+//! satisfies them. The objective is the squared TCP distance (same minimiser as the distance of
+//! Algorithm 1, but smooth at the solution) plus a very small penalty on the increments, which
+//! picks the smoothest of the redundant postures that reach the target equally well.
+//!
+//! f_SP is a cubic RBF interpolant ([`crate::rbf`]) of the optimised postures over the pressures,
+//! its output projected onto the feasible set; the dissertation's MLP belongs to the learned
+//! dynamics crate and can replace it. The inverse maps the three group means back to pressures
+//! with the same kind of interpolant.
+
+use crate::chain::{ChainGeometry, GROUPS, KINDS, N_JOINTS, Posture};
+use crate::constraints::Limits;
+use crate::fem_samples::FemSample;
+use crate::rbf::Rbf;
+use crate::{Result, SurrogateError};
+use ganesh::Vector;
+use ganesh::algorithms::gradient::{LBFGSB, LBFGSBConfig, LBFGSBErrorMode};
+use ganesh::core::MaxSteps;
+use ganesh::traits::{Algorithm, CostFunction, Gradient};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use std::convert::Infallible;
+
+/// Settings of Algorithm 1.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MatchConfig {
+    /// Iteration cap (N_max).
+    pub max_iterations: usize,
+    /// Weight of the increment penalty, mm^2 per unit^2 of the scaled increments
+    /// (0.1 rad, 0.01 m).
+    pub smoothing: f64,
+}
+
+impl Default for MatchConfig {
+    fn default() -> Self {
+        MatchConfig {
+            max_iterations: 200,
+            smoothing: 1e-4,
+        }
+    }
+}
+
+/// Optimiser scale of each joint: 0.1 rad or 0.01 m per unit, so all variables are O(1).
+fn scale(j: usize) -> f64 {
+    match KINDS[j] {
+        crate::chain::JointKind::Prismatic => 0.01,
+        _ => 0.1,
+    }
+}
+
+struct TcpProblem<'a> {
+    chain: &'a ChainGeometry,
+    limits: &'a Limits,
+    target_mm: Vector3<f64>,
+    smoothing: f64,
+}
+
+impl TcpProblem<'_> {
+    fn posture(&self, u: &[f64]) -> Posture {
+        let z: Posture = std::array::from_fn(|j| u[j] * scale(j));
+        self.limits.from_increments(&z)
+    }
+
+    fn value_grad(&self, u: &[f64]) -> (f64, [f64; N_JOINTS]) {
+        let q = self.posture(u);
+        let (tcp, jac) = self.chain.tcp_jacobian(&q);
+        let err = tcp * 1e3 - self.target_mm;
+        // dq/du by forward propagation through the clamps of each group.
+        let mut dq = [[0.0; N_JOINTS]; N_JOINTS]; // dq[j][i] = dq_j / du_i
+        for members in GROUPS.iter() {
+            for (k, &j) in members.iter().enumerate() {
+                let [lo, hi] = self.limits.range(j);
+                let raw = if k == 0 {
+                    u[j] * scale(j)
+                } else {
+                    q[members[k - 1]] + u[j] * scale(j)
+                };
+                // The first joint's range is the optimiser's own box bound, so its clamp never
+                // acts inside the box; for the others a clamp at the limit passes the derivative
+                // of the side the joint can move to (inclusive test), else the optimiser could
+                // never leave a limit it starts on.
+                if k == 0 || (raw >= lo && raw <= hi) {
+                    if k > 0 {
+                        dq[j] = dq[members[k - 1]];
+                    }
+                    dq[j][j] = scale(j);
+                }
+            }
+        }
+        let g_q: [f64; N_JOINTS] = std::array::from_fn(|j| 2e3 * jac.column(j).dot(&err));
+        let mut f = err.norm_squared();
+        let mut g = [0.0; N_JOINTS];
+        for i in 0..N_JOINTS {
+            g[i] = (0..N_JOINTS).map(|j| g_q[j] * dq[j][i]).sum();
+        }
+        for members in GROUPS.iter() {
+            for &j in &members[1..] {
+                f += self.smoothing * u[j] * u[j];
+                g[j] += 2.0 * self.smoothing * u[j];
+            }
+        }
+        (f, g)
+    }
+}
+
+impl CostFunction for TcpProblem<'_> {
+    fn evaluate(&self, x: &Vector<f64>, _: &()) -> std::result::Result<f64, Infallible> {
+        Ok(self.value_grad(&x.to_vec()).0)
+    }
+}
+
+impl Gradient for TcpProblem<'_> {
+    fn gradient(&self, x: &Vector<f64>, _: &()) -> std::result::Result<Vector<f64>, Infallible> {
+        Ok(Vector::from_vec(self.value_grad(&x.to_vec()).1.to_vec()))
+    }
+}
+
+/// The result of Algorithm 1 for one target.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Match {
+    /// Optimised posture (feasible).
+    pub posture: Posture,
+    /// Remaining TCP distance, m.
+    pub error_m: f64,
+}
+
+/// Algorithm 1: the feasible posture whose TCP is closest to `target_m`, from `init` (made
+/// feasible first).
+pub fn match_tcp(
+    chain: &ChainGeometry,
+    limits: &Limits,
+    target_m: &Vector3<f64>,
+    init: &Posture,
+    cfg: &MatchConfig,
+) -> Result<Match> {
+    if !target_m.iter().all(|v| v.is_finite()) {
+        return Err(SurrogateError::Invalid(format!(
+            "target TCP {target_m:?} is not finite"
+        )));
+    }
+    let problem = TcpProblem {
+        chain,
+        limits,
+        target_mm: target_m * 1e3,
+        smoothing: cfg.smoothing,
+    };
+    let z0 = limits.to_increments(&limits.project(init)?);
+    let u0: Vec<f64> = (0..N_JOINTS).map(|j| z0[j] / scale(j)).collect();
+    let bounds: Vec<(f64, f64)> = limits
+        .increment_bounds()
+        .iter()
+        .enumerate()
+        .map(|(j, (a, b))| (a / scale(j), b / scale(j)))
+        .collect();
+    let config = LBFGSBConfig::<f64>::default()
+        .with_bounds(bounds)
+        .map_err(|e| SurrogateError::Solver(format!("L-BFGS-B bounds: {e}")))?
+        .with_error_mode(LBFGSBErrorMode::Skip);
+    let summary = LBFGSB::<f64>::default()
+        .process(
+            &problem,
+            &(),
+            Vector::from_vec(u0),
+            config,
+            LBFGSB::<f64>::default_callbacks().with_terminator(MaxSteps(cfg.max_iterations)),
+        )
+        .map_err(|e| SurrogateError::Solver(format!("L-BFGS-B: {e:?}")))?;
+    let posture = problem.posture(&summary.x.to_vec());
+    Ok(Match {
+        posture,
+        error_m: (chain.tcp(&posture) - target_m).norm(),
+    })
+}
+
+/// Runs Algorithm 1 for every sample, each from the better of rest and the previous solution
+/// (neighbouring grid samples have neighbouring postures).
+pub fn match_samples(
+    chain: &ChainGeometry,
+    limits: &Limits,
+    samples: &[FemSample],
+    cfg: &MatchConfig,
+    mut on_sample: impl FnMut(usize),
+) -> Result<Vec<Match>> {
+    let mut out: Vec<Match> = Vec::with_capacity(samples.len());
+    let rest = limits.project(&[0.0; N_JOINTS])?;
+    for (k, s) in samples.iter().enumerate() {
+        let t = Vector3::from(s.tcp_m);
+        let mut best = match_tcp(chain, limits, &t, &rest, cfg)?;
+        if let Some(prev) = out.last() {
+            let warm = match_tcp(chain, limits, &t, &prev.posture, cfg)?;
+            if warm.error_m < best.error_m {
+                best = warm;
+            }
+        }
+        out.push(best);
+        on_sample(k);
+    }
+    Ok(out)
+}
+
+/// Group means (theta_x, theta_y, d) of a posture.
+pub fn group_means(q: &Posture) -> [f64; 3] {
+    std::array::from_fn(|g| GROUPS[g].iter().map(|&j| q[j]).sum::<f64>() / GROUPS[g].len() as f64)
+}
+
+/// f_SP and its inverse.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct ActuationMap {
+    /// Pressures (kPa) -> posture.
+    pub forward: Rbf,
+    /// Group means (rad, rad, m) -> pressures (kPa).
+    pub inverse: Rbf,
+    /// Limits the forward output is projected onto.
+    pub limits: Limits,
+}
+
+impl ActuationMap {
+    /// Fits both interpolants to samples and their optimised postures.
+    pub fn fit(samples: &[FemSample], matches: &[Match], limits: &Limits) -> Result<Self> {
+        let p: Vec<Vec<f64>> = samples.iter().map(|s| s.pressures_kpa.to_vec()).collect();
+        let q: Vec<Vec<f64>> = matches.iter().map(|m| m.posture.to_vec()).collect();
+        let g: Vec<Vec<f64>> = matches
+            .iter()
+            .map(|m| group_means(&m.posture).to_vec())
+            .collect();
+        Ok(ActuationMap {
+            forward: Rbf::fit(&p, &q)?,
+            inverse: Rbf::fit(&g, &p)?,
+            limits: *limits,
+        })
+    }
+
+    /// f_SP: the feasible posture for chamber pressures in kPa (-20..35).
+    pub fn posture(&self, pressures_kpa: &[f64; 3]) -> Result<Posture> {
+        ocm_fem::bellows::check_pressures(pressures_kpa)?;
+        let y = self.forward.eval(pressures_kpa);
+        let q: Posture = std::array::from_fn(|j| y[j]);
+        self.limits.project(&q)
+    }
+
+    /// Inverse of f_SP: pressures in kPa for a posture (through its group means).
+    pub fn pressures(&self, q: &Posture) -> Result<[f64; 3]> {
+        self.limits.check(q)?;
+        let y = self.inverse.eval(&group_means(q));
+        Ok([y[0], y[1], y[2]])
+    }
+}
