@@ -63,6 +63,79 @@ pub enum TactileCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Renders DIGIT frames (PNG) from the FEM displacement fields of `indent` with a real
+    /// DIGIT's optical calibration (slopes -> colour change) on a real background; with --bench
+    /// it measures frames per second instead.
+    Render {
+        /// Folder with u_NNN.npy displacement fields written by `ocm tactile indent`.
+        fields: PathBuf,
+        /// Data directory (default: OCM_DATA_DIR, else ../shared/data).
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// Gel mesh the fields belong to.
+        #[arg(long, value_enum, default_value = "fine")]
+        mesh: MeshArg,
+        /// Background (RGB, 320 x 240 or 640 x 480). Default: frame 00 of the real edge6
+        /// sequence (no contact).
+        #[arg(long)]
+        background: Option<PathBuf>,
+        /// Optical calibration (.npz). Default: digit/optics/taxim_polycalib.npz.
+        #[arg(long)]
+        calib: Option<PathBuf>,
+        /// Camera map with the fitted gain and smoothing (JSON, as `compare-real` writes to
+        /// map.json). Default: the image is the mask grid (columns along gel x, rows along y,
+        /// 0.0625 mm per pixel), calibrated gain 1, no smoothing.
+        #[arg(long)]
+        map: Option<PathBuf>,
+        /// Render every this many steps (and the last).
+        #[arg(long, default_value_t = 10)]
+        every: usize,
+        /// Output folder for render_NNN.png.
+        #[arg(long, default_value = "render-out")]
+        out: PathBuf,
+        /// Benchmark: render this many frames per repeat (5 repeats; no PNGs), print frames/s.
+        #[arg(long)]
+        bench: Option<usize>,
+        /// Worker threads (rendering and benchmark).
+        #[arg(long, default_value_t = 2)]
+        threads: usize,
+        /// Print a JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// The FEM against the real DIGIT frames of the edge indentation (real-frames-edge6):
+    /// measured contact masks (background subtraction against frame 00, threshold) against
+    /// the FEM masks at the same depths, the gel-to-image map and the step offset fitted on the
+    /// even frames and scored on the odd ones; then frames rendered from the FEM against the
+    /// real frames (L1, PSNR, SSIM, mask IoU). Writes PNGs and summary.json.
+    CompareReal {
+        /// Data directory (default: OCM_DATA_DIR, else ../shared/data).
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// Gel mesh.
+        #[arg(long, value_enum, default_value = "fine")]
+        mesh: MeshArg,
+        /// Set-up of the real sequence.
+        #[arg(long, default_value = "edge6")]
+        setup: String,
+        /// FEM cache: u_NNN.npy from an earlier run of this set-up and mesh are reused; else the
+        /// FEM runs and writes them there.
+        #[arg(long, default_value = "out/tactile/edge6-fem")]
+        fem: PathBuf,
+        /// FEM steps of 10 um.
+        #[arg(long, default_value_t = 100)]
+        steps: usize,
+        /// Mask threshold: mean |frame - background| over R, G, B after a 5 x 5 box blur,
+        /// grey levels.
+        #[arg(long, default_value_t = 10.0)]
+        threshold: f64,
+        /// Output folder.
+        #[arg(long, default_value = "out/tactile/compare-real")]
+        out: PathBuf,
+        /// Print the JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
     /// Compares two images: as masks (grey > 127) IoU, centroid and rotation errors in pixels
     /// and radians; as grey images L1, PSNR and SSIM.
     Metrics {
@@ -207,6 +280,50 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        TactileCommand::Render {
+            fields,
+            data,
+            mesh,
+            background,
+            calib,
+            map,
+            every,
+            out,
+            bench,
+            threads,
+            json,
+        } => render(RenderArgs {
+            fields,
+            data,
+            mesh,
+            background,
+            calib,
+            map,
+            every,
+            out,
+            bench,
+            threads,
+            json,
+        }),
+        TactileCommand::CompareReal {
+            data,
+            mesh,
+            setup,
+            fem,
+            steps,
+            threshold,
+            out,
+            json,
+        } => compare_real(CompareArgs {
+            data,
+            mesh,
+            setup,
+            fem,
+            steps,
+            threshold,
+            out,
+            json,
+        }),
         TactileCommand::Metrics { a, b, json } => {
             let ia = read_gray(&a)?;
             let ib = read_gray(&b)?;
@@ -248,4 +365,396 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             Ok(())
         }
     }
+}
+
+fn mesh_file(mesh: MeshArg) -> &'static str {
+    match mesh {
+        MeshArg::Fine => "DIGIT_v8.vtk",
+        MeshArg::Coarse => "DIGIT_remesh2.vtk",
+    }
+}
+
+struct RenderArgs {
+    fields: PathBuf,
+    data: Option<PathBuf>,
+    mesh: MeshArg,
+    background: Option<PathBuf>,
+    calib: Option<PathBuf>,
+    map: Option<PathBuf>,
+    every: usize,
+    out: PathBuf,
+    bench: Option<usize>,
+    threads: usize,
+    json: bool,
+}
+
+/// Step numbers of the u_NNN.npy files in `dir`, sorted.
+fn field_steps(dir: &std::path::Path) -> anyhow::Result<Vec<usize>> {
+    let mut steps = Vec::new();
+    for e in std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))? {
+        let name = e?.file_name().to_string_lossy().to_string();
+        if let Some(n) = name
+            .strip_prefix("u_")
+            .and_then(|r| r.strip_suffix(".npy"))
+            .and_then(|n| n.parse::<usize>().ok())
+        {
+            steps.push(n);
+        }
+    }
+    steps.sort_unstable();
+    if steps.is_empty() {
+        bail!(
+            "{} holds no u_NNN.npy fields (write them with `ocm tactile indent --out`)",
+            dir.display()
+        );
+    }
+    Ok(steps)
+}
+
+fn read_field(path: &std::path::Path, nodes: usize) -> anyhow::Result<Vec<[f64; 3]>> {
+    let a = ocm_fem::npy::read_f64_2d(path)?;
+    if a.rows != nodes || a.cols != 3 {
+        bail!(
+            "{} is {} x {}, the gel mesh has {nodes} nodes (x 3): wrong --mesh?",
+            path.display(),
+            a.rows,
+            a.cols
+        );
+    }
+    Ok(a.data.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+}
+
+fn render(a: RenderArgs) -> anyhow::Result<()> {
+    use ocm_tactile::optics::bench::bench_render;
+    use ocm_tactile::optics::{CameraMap, PolyCalib, Renderer, RgbImage, SurfaceSampler};
+    use ocm_tactile::real::{COLS, ROWS};
+    let digit = ocm_datadir::data_file(a.data.as_deref(), "digit")?;
+    let gel = Gel::digit(digit.join(mesh_file(a.mesh)), GelMaterial::default())?;
+    let calib_path = a
+        .calib
+        .unwrap_or_else(|| digit.join("optics/taxim_polycalib.npz"));
+    let calib = PolyCalib::from_npz(&calib_path)?;
+    let bg_path = a
+        .background
+        .unwrap_or_else(|| digit.join("real-frames-edge6/edge6_00.jpg"));
+    let bg = RgbImage::read_sized(&bg_path, ROWS, COLS)?;
+    let mut renderer = Renderer::new(calib, &bg)?;
+    let map = match &a.map {
+        Some(p) => {
+            let text =
+                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            let v: serde_json::Value = serde_json::from_str(&text)
+                .with_context(|| format!("{} is not JSON", p.display()))?;
+            // The optics fitted by compare-real travel with the map.
+            if let Some(g) = v.get("gain").and_then(serde_json::Value::as_f64) {
+                renderer.gain = g as f32;
+            }
+            if let Some(sm) = v.get("smooth_px").and_then(serde_json::Value::as_f64) {
+                renderer.smooth_px = sm as f32;
+            }
+            serde_json::from_value::<CameraMap>(v.get("map").cloned().unwrap_or(v))
+                .with_context(|| format!("{}: no camera map", p.display()))?
+        }
+        None => CameraMap::for_grid(&Grid::for_gel(&gel)),
+    };
+    let sampler = SurfaceSampler::new(&gel, ROWS, COLS, &map);
+    let steps = field_steps(&a.fields)?;
+    if let Some(frames) = a.bench {
+        let fields: Vec<Vec<[f64; 3]>> = steps
+            .iter()
+            .map(|s| read_field(&a.fields.join(format!("u_{s:03}.npy")), gel.num_nodes()))
+            .collect::<anyhow::Result<_>>()?;
+        let b = bench_render(&renderer, &sampler, &fields, frames, 5, a.threads)?;
+        let v = serde_json::json!({
+            "frames_per_repeat": b.frames,
+            "repeats": b.fps.len(),
+            "threads": b.threads,
+            "image": [b.size[0], b.size[1]],
+            "fps": b.fps,
+            "median_fps": b.median_fps,
+            "smooth_px": renderer.smooth_px,
+            "goal_fps": 300,
+            "goal_met": b.median_fps >= 300.0,
+            "mesh": mesh_file(a.mesh),
+            "fields": steps.len(),
+        });
+        if a.json {
+            println!("{}", serde_json::to_string_pretty(&v)?);
+        } else {
+            println!(
+                "renderer: median {:.0} frames/s on {} threads ({} x {} px, {} frames x {} repeats; goal 300)",
+                b.median_fps,
+                b.threads,
+                b.size[1],
+                b.size[0],
+                b.frames,
+                b.fps.len()
+            );
+        }
+        return Ok(());
+    }
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let pool = rayon_pool(a.threads)?;
+    let every = a.every.max(1);
+    let last = *steps.last().context("no steps")?;
+    let chosen: Vec<usize> = steps
+        .iter()
+        .copied()
+        .filter(|s| s % every == 0 || *s == last)
+        .collect();
+    let pb = bar(chosen.len(), "render");
+    let mut written = Vec::new();
+    for s in &chosen {
+        let u = read_field(&a.fields.join(format!("u_{s:03}.npy")), gel.num_nodes())?;
+        let img = pool.install(|| ocm_tactile::real::render_step(&renderer, &sampler, &u))?;
+        let p = a.out.join(format!("render_{s:03}.png"));
+        img.write_png(&p)?;
+        written.push(p.display().to_string());
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let v = serde_json::json!({
+        "mesh": mesh_file(a.mesh),
+        "calibration": calib_path.display().to_string(),
+        "background": bg_path.display().to_string(),
+        "map": map,
+        "pixels_on_gel": sampler.covered(),
+        "images": written,
+    });
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        println!(
+            "rendered {} frames ({} x {} px, {} on the gel) into {}",
+            written.len(),
+            COLS,
+            ROWS,
+            sampler.covered(),
+            a.out.display()
+        );
+    }
+    Ok(())
+}
+
+fn rayon_pool(threads: usize) -> anyhow::Result<ocm_tactile::optics::bench::Pool> {
+    Ok(ocm_tactile::optics::bench::pool(threads)?)
+}
+
+struct CompareArgs {
+    data: Option<PathBuf>,
+    mesh: MeshArg,
+    setup: String,
+    fem: PathBuf,
+    steps: usize,
+    threshold: f64,
+    out: PathBuf,
+    json: bool,
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut s: Vec<f64> = v.iter().copied().filter(|x| !x.is_nan()).collect();
+    if s.is_empty() {
+        return f64::NAN;
+    }
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    }
+}
+
+fn mean(v: &[f64]) -> f64 {
+    let s: Vec<f64> = v.iter().copied().filter(|x| !x.is_nan()).collect();
+    s.iter().sum::<f64>() / s.len().max(1) as f64
+}
+
+fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
+    use ocm_tactile::optics::{PolyCalib, Renderer};
+    use ocm_tactile::real::{self, CompareOptions, MaskOptions};
+    let t_start = std::time::Instant::now();
+    let digit = ocm_datadir::data_file(a.data.as_deref(), "digit")?;
+    let frames = real::load_frames(&digit.join("real-frames-edge6"), "edge6")?;
+    let bg = frames[0].clone();
+    let setups = digit_setups(&digit)?;
+    let Some(s) = setups.iter().find(|s| s.name == a.setup) else {
+        bail!("no set-up named '{}'", a.setup);
+    };
+    let gel = Gel::digit(digit.join(mesh_file(a.mesh)), GelMaterial::default())?;
+    let grid = Grid::for_gel(&gel);
+    std::fs::create_dir_all(&a.fem).with_context(|| format!("creating {}", a.fem.display()))?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    // The FEM, from the cache when it is complete for this mesh.
+    let mut fem_seconds = None;
+    let fields = match real::read_cached_steps(&a.fem, a.steps, gel.num_nodes()) {
+        Some(f) => f,
+        None => {
+            let indenter = Indenter::from_stl(&s.stl)?;
+            let opts = IndentOptions {
+                steps: a.steps,
+                ..IndentOptions::protocol(gel.material.young_pa)
+            };
+            let mut run = Indentation::new(&s.name, &gel, &indenter, s.placement, opts)?;
+            let pb = bar(a.steps, &format!("FEM {} ({})", s.name, mesh_file(a.mesh)));
+            let t0 = std::time::Instant::now();
+            let mut rows = Vec::new();
+            let mut write_err = None;
+            let outputs = run.run(|st| {
+                match write_step(&a.fem, &gel, &grid, st, st.step == a.steps) {
+                    Ok(m) => rows.push(StepRow::new(st, m)),
+                    Err(e) => {
+                        write_err.get_or_insert(e);
+                    }
+                }
+                pb.inc(1);
+            });
+            pb.finish_and_clear();
+            if let Some(e) = write_err {
+                return Err(e.into());
+            }
+            let outputs = outputs?;
+            fem_seconds = Some(t0.elapsed().as_secs_f64());
+            write_force_depth_csv(&a.fem.join("force_depth.csv"), &rows)?;
+            outputs.into_iter().map(|o| o.displacement).collect()
+        }
+    };
+    let opts = CompareOptions {
+        mask: MaskOptions {
+            threshold: a.threshold,
+            ..MaskOptions::default()
+        },
+        ..CompareOptions::default()
+    };
+    let calib = PolyCalib::from_npz(digit.join("optics/taxim_polycalib.npz"))?;
+    let mut renderer = Renderer::new(calib, &bg)?;
+    let pb = bar(2, "compare-real");
+    let c = real::compare(&gel, &fields, &frames, &mut renderer, &opts, &mut |stage| {
+        pb.set_message(stage.to_string());
+        pb.inc(1);
+    })?;
+    pb.finish_and_clear();
+    let score = &c.score_frames;
+    let mut pngs = Vec::new();
+    for k in [
+        score[score.len() / 4],
+        score[score.len() / 2],
+        *score.last().context("no scoring frames")?,
+    ] {
+        pngs.extend(real::write_figures(
+            &a.out, &gel, &fields, &frames, &renderer, &c, &opts, k,
+        )?);
+    }
+    let ious: Vec<f64> = c.masks.iter().map(|m| m.iou).collect();
+    let cens: Vec<f64> = c.masks.iter().map(|m| m.centroid_error_mm).collect();
+    let rots: Vec<f64> = c.masks.iter().map(|m| m.rotation_error_rad).collect();
+    let col = |v: &[real::RenderScore], f: fn(&real::RenderScore) -> f64| -> Vec<f64> {
+        v.iter().map(f).collect()
+    };
+    let summary_render = |v: &[real::RenderScore]| {
+        serde_json::json!({
+            "l1_median": median(&col(v, |r| r.l1)),
+            "psnr_db_median": median(&col(v, |r| r.psnr_db)),
+            "ssim_median": median(&col(v, |r| r.ssim)),
+            "ssim_min": col(v, |r| r.ssim).into_iter().fold(f64::INFINITY, f64::min),
+            "mask_iou_median": median(&col(v, |r| r.mask_iou)),
+        })
+    };
+    let ssim_med = median(&col(&c.render, |r| r.ssim));
+    let v = serde_json::json!({
+        "setup": s.name,
+        "mesh": mesh_file(a.mesh),
+        "nodes": gel.num_nodes(),
+        "fem_steps": fields.len(),
+        "fem_seconds": fem_seconds,
+        "fem_cache": a.fem.display().to_string(),
+        "frames": frames.len(),
+        "fit_frames": "even 2..98",
+        "score_frames": "odd 1..99",
+        "mask_threshold": a.threshold,
+        "map": c.fit.map,
+        "map_mm_per_px": 1e3 / c.fit.map.px_per_m,
+        "offset_steps": c.fit.offset_steps,
+        "offsets_tried": c.offsets_tried,
+        "fit_iou": c.fit.fit_iou,
+        "masks": {
+            "scored_depths": c.masks.len(),
+            "iou_median": median(&ious),
+            "iou_mean": mean(&ious),
+            "centroid_error_mm_median": median(&cens),
+            "rotation_error_rad_median": median(&rots),
+            "goal_iou": 0.85,
+            "goal_met": median(&ious) >= 0.85,
+            "per_depth": c.masks,
+        },
+        "render": {
+            "gain_fitted": c.gain,
+            "smooth_px_fitted": c.smooth_px,
+            "fit_ssim": c.fit_ssim,
+            "fitted_gain": summary_render(&c.render),
+            "calibrated_gain_1": summary_render(&c.render_gain1),
+            "background_only_baseline": summary_render(&c.background_only),
+            "goal_ssim": 0.93,
+            "goal_met": ssim_med >= 0.93,
+            "per_depth": c.render,
+        },
+        "images": pngs,
+        "seconds": t_start.elapsed().as_secs_f64(),
+    });
+    std::fs::write(
+        a.out.join("summary.json"),
+        serde_json::to_string_pretty(&v)?,
+    )
+    .with_context(|| format!("writing {}", a.out.display()))?;
+    std::fs::write(
+        a.out.join("map.json"),
+        serde_json::to_string_pretty(&serde_json::json!({
+            "map": c.fit.map,
+            "gain": c.gain,
+            "smooth_px": c.smooth_px,
+        }))?,
+    )?;
+    let plot_iou = Chart {
+        title: &format!("FEM vs real masks, {} (odd frames scored)", s.name),
+        x_label: "real frame (10 um steps)",
+        y_label: "IoU",
+        series: vec![
+            Series {
+                label: "mask IoU".into(),
+                points: c.masks.iter().map(|m| (m.frame as f64, m.iou)).collect(),
+                dots: true,
+            },
+            Series {
+                label: "rendered SSIM".into(),
+                points: c.render.iter().map(|m| (m.frame as f64, m.ssim)).collect(),
+                dots: true,
+            },
+        ],
+        equal_axes: false,
+    };
+    plot_iou.write(&a.out, "scores")?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        println!(
+            "{} on {}: map {:.4} mm/px, angle {:.3} rad, mirror {}, offset {} steps (fit IoU {:.3}); masks on the odd frames: IoU median {:.3} (goal 0.85), centroid {:.3} mm, rotation {:.3} rad; rendered (gain {:.2}): SSIM median {:.3} (goal 0.93), L1 {:.2}, PSNR {:.1} dB, mask IoU {:.3}; files in {}",
+            s.name,
+            mesh_file(a.mesh),
+            1e3 / c.fit.map.px_per_m,
+            c.fit.map.angle_rad,
+            c.fit.map.mirror,
+            c.fit.offset_steps,
+            c.fit.fit_iou,
+            median(&ious),
+            median(&cens),
+            median(&rots),
+            c.gain,
+            ssim_med,
+            median(&col(&c.render, |r| r.l1)),
+            median(&col(&c.render, |r| r.psnr_db)),
+            median(&col(&c.render, |r| r.mask_iou)),
+            a.out.display()
+        );
+    }
+    Ok(())
 }

@@ -1,4 +1,5 @@
-//! Minimal NumPy .npy writer and reader (format 1.0, little-endian float64, C order).
+//! Minimal NumPy .npy writer (format 1.0, little-endian float64, C order) and reader (any rank;
+//! float64, float32, int64, int32).
 
 use crate::{FemError, Result};
 use std::io::Write;
@@ -64,8 +65,19 @@ pub struct Array2 {
     pub cols: usize,
 }
 
-/// Parses .npy bytes (versions 1.0-3.0, `<f8`, C order, 1-D or 2-D); `name` labels the errors.
-pub fn parse_f64_2d(bytes: &[u8], name: &str) -> Result<Array2> {
+/// An array of any rank read from a .npy file, converted to f64: row-major (C order) data and
+/// its shape (empty for a scalar).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArrayNd {
+    /// Row-major values.
+    pub data: Vec<f64>,
+    /// Shape; `[]` for a 0-d scalar.
+    pub shape: Vec<usize>,
+}
+
+/// Parses .npy bytes of any rank (versions 1.0-3.0, C order) with little-endian dtype `<f8`,
+/// `<f4`, `<i8` or `<i4`, converting the values to f64; `name` labels the errors.
+pub fn parse_nd(bytes: &[u8], name: &str) -> Result<ArrayNd> {
     let bad = |at: &str, msg: String| FemError::parse("NPY", format!("{name}: {at}"), msg);
     if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
         return Err(bad("magic", "not a .npy file (bad magic string)".into()));
@@ -91,12 +103,23 @@ pub fn parse_f64_2d(bytes: &[u8], name: &str) -> Result<Array2> {
         Some(rest.trim_start())
     };
     let descr = field("descr").ok_or_else(|| bad("header", "no 'descr'".into()))?;
-    if !descr.starts_with("'<f8'") {
+    // Width in bytes and whether the dtype is a float.
+    let (width, float) = if descr.starts_with("'<f8'") {
+        (8, true)
+    } else if descr.starts_with("'<f4'") {
+        (4, true)
+    } else if descr.starts_with("'<i8'") {
+        (8, false)
+    } else if descr.starts_with("'<i4'") {
+        (4, false)
+    } else {
         return Err(bad(
             "header",
-            format!("dtype {descr:.8} is not little-endian float64 '<f8'"),
+            format!(
+                "dtype {descr:.8} is not little-endian float64 '<f8' (nor '<f4', '<i8', '<i4')"
+            ),
         ));
-    }
+    };
     if !field("fortran_order").is_some_and(|f| f.starts_with("False")) {
         return Err(bad("header", "Fortran order is not supported".into()));
     }
@@ -112,15 +135,10 @@ pub fn parse_f64_2d(bytes: &[u8], name: &str) -> Result<Array2> {
         .map(|t| t.parse::<usize>())
         .collect::<std::result::Result<_, _>>()
         .map_err(|e| bad("header", format!("shape ({inner}): {e}")))?;
-    let (rows, cols) = match dims[..] {
-        [n] => (n, 1),
-        [r, c] => (r, c),
-        _ => return Err(bad("header", format!("shape ({inner}) is not 1-D or 2-D"))),
-    };
     let body = &bytes[start + hlen..];
-    let want = rows
-        .checked_mul(cols)
-        .and_then(|n| n.checked_mul(8))
+    let want = dims
+        .iter()
+        .try_fold(width, |n: usize, &d| n.checked_mul(d))
         .ok_or_else(|| bad("header", format!("shape ({inner}) overflows")))?;
     if body.len() < want {
         return Err(bad(
@@ -138,10 +156,51 @@ pub fn parse_f64_2d(bytes: &[u8], name: &str) -> Result<Array2> {
         ));
     }
     let data = body
-        .chunks_exact(8)
-        .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
+        .chunks_exact(width)
+        .map(|c| match (width, float) {
+            (8, true) => f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]),
+            (4, true) => f64::from(f32::from_le_bytes([c[0], c[1], c[2], c[3]])),
+            (8, false) => {
+                i64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f64
+            }
+            _ => f64::from(i32::from_le_bytes([c[0], c[1], c[2], c[3]])),
+        })
         .collect();
-    Ok(Array2 { data, rows, cols })
+    Ok(ArrayNd { data, shape: dims })
+}
+
+/// Parses .npy bytes (versions 1.0-3.0, `<f8`, C order, 1-D or 2-D); `name` labels the errors.
+pub fn parse_f64_2d(bytes: &[u8], name: &str) -> Result<Array2> {
+    let bad = |at: &str, msg: String| FemError::parse("NPY", format!("{name}: {at}"), msg);
+    // Only float64 is accepted here: callers store f64 fields and a silent conversion from an
+    // integer or f32 file would hide a wrong file.
+    if let Some(at) = bytes.windows(7).position(|w| w == b"'descr'") {
+        let rest = &bytes[at + 7..bytes.len().min(at + 20)];
+        let text = String::from_utf8_lossy(rest);
+        let text = text.trim_start().trim_start_matches(':').trim_start();
+        if !text.starts_with("'<f8'") && bytes.starts_with(b"\x93NUMPY") {
+            return Err(bad(
+                "header",
+                format!("dtype {text:.8} is not little-endian float64 '<f8'"),
+            ));
+        }
+    }
+    let a = parse_nd(bytes, name)?;
+    let (rows, cols) = match a.shape[..] {
+        [n] => (n, 1),
+        [r, c] => (r, c),
+        _ => {
+            return Err(bad(
+                "header",
+                format!("shape {:?} is not 1-D or 2-D", a.shape),
+            ));
+        }
+    };
+    Ok(Array2 {
+        data: a.data,
+        rows,
+        cols,
+    })
 }
 
 /// Reads a float64 .npy file (see [`parse_f64_2d`]); errors name the file.
@@ -212,5 +271,42 @@ mod tests {
         c[at + 1] = b'i';
         let e = parse_f64_2d(&c, "z.npy").unwrap_err().to_string();
         assert!(e.contains("z.npy") && e.contains("float64"), "{e}");
+    }
+
+    fn npy_bytes(descr: &str, shape: &str, body: &[u8]) -> Vec<u8> {
+        let h = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}\n");
+        let mut b = b"\x93NUMPY\x01\x00".to_vec();
+        b.extend_from_slice(&(h.len() as u16).to_le_bytes());
+        b.extend_from_slice(h.as_bytes());
+        b.extend_from_slice(body);
+        b
+    }
+
+    /// A 3-D float64 array keeps its shape and C order; a 0-d int64 scalar (what numpy's
+    /// `np.savez(bins=125)` stores) and float32 data convert to f64; the 2-D reader refuses both.
+    #[test]
+    fn nd_reader_shapes_and_dtypes() {
+        let vals: Vec<f64> = (0..24).map(|i| i as f64 * 0.5 - 3.0).collect();
+        let body: Vec<u8> = vals.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let a = parse_nd(&npy_bytes("<f8", "(2, 3, 4)", &body), "t.npy").unwrap();
+        assert_eq!(a.shape, vec![2, 3, 4]);
+        assert_eq!(a.data, vals);
+        let e = parse_f64_2d(&npy_bytes("<f8", "(2, 3, 4)", &body), "t.npy")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not 1-D or 2-D"), "{e}");
+        let s = parse_nd(&npy_bytes("<i8", "()", &125i64.to_le_bytes()), "bins.npy").unwrap();
+        assert_eq!((s.shape.len(), s.data.clone()), (0, vec![125.0]));
+        assert!(parse_f64_2d(&npy_bytes("<i8", "(1,)", &125i64.to_le_bytes()), "b").is_err());
+        let f: Vec<u8> = [1.5f32, -2.25]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let a = parse_nd(&npy_bytes("<f4", "(2,)", &f), "f.npy").unwrap();
+        assert_eq!(a.data, vec![1.5, -2.25]);
+        let e = parse_nd(&npy_bytes("<u2", "(2,)", &[0; 4]), "u.npy")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("u.npy") && e.contains("dtype"), "{e}");
     }
 }

@@ -67,6 +67,14 @@ pub enum TactileError {
         /// The cause.
         msg: String,
     },
+    /// An optical calibration file is missing, malformed or inconsistent.
+    #[error("optical calibration {path}: {msg}")]
+    Calibration {
+        /// The file (or array inside it).
+        path: String,
+        /// What is wrong.
+        msg: String,
+    },
 }
 
 /// Result alias for this crate.

@@ -18,7 +18,9 @@ pub mod indent;
 pub mod indenter;
 pub mod mask;
 pub mod metrics;
+pub mod optics;
 pub mod output;
+pub mod real;
 pub mod setup;
 pub mod shapes;
 

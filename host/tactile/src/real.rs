@@ -1,0 +1,886 @@
+//! The FEM against real DIGIT frames (issue 16 item 4, issue 17 item 1): measured contact
+//! masks from the real frames by background subtraction, simulated masks from the FEM at the
+//! same depths, the gel-to-image map fitted on half of the depths and scored on the other half;
+//! then frames rendered from the FEM against the real frames.
+
+use crate::gel::Gel;
+use crate::mask::{CLOSING_KERNEL_PX, Grid, Mask, mask_from_fn};
+use crate::metrics;
+use crate::optics::{CameraMap, Renderer, RgbImage, SurfaceSampler};
+use crate::{Result, TactileError};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Rows of the compared images (the DIGIT frame at half its 640 x 480 stream).
+pub const ROWS: usize = 240;
+/// Columns of the compared images.
+pub const COLS: usize = 320;
+
+/// Reads `{prefix}_00.jpg`, `{prefix}_01.jpg`, ... from `dir` until the first missing number,
+/// at 240 x 320 (a 480 x 640 frame is averaged over 2 x 2 blocks). Frame 0 is the background.
+pub fn load_frames(dir: &Path, prefix: &str) -> Result<Vec<RgbImage>> {
+    let mut frames = Vec::new();
+    loop {
+        let p = dir.join(format!("{prefix}_{:02}.jpg", frames.len()));
+        if !p.exists() {
+            break;
+        }
+        frames.push(RgbImage::read_sized(&p, ROWS, COLS)?);
+    }
+    if frames.len() < 3 {
+        return Err(TactileError::Input(format!(
+            "{}: found {} frames {prefix}_NN.jpg; need a background and at least two contact frames",
+            dir.display(),
+            frames.len()
+        )));
+    }
+    Ok(frames)
+}
+
+/// The image as a mask grid with one unit per pixel (centroids in pixels).
+pub fn image_grid(rows: usize, cols: usize) -> Grid {
+    Grid {
+        origin_m: [0.0, 0.0],
+        pixel_m: 1.0,
+        cols,
+        rows,
+    }
+}
+
+/// How a contact mask is measured on a real frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MaskOptions {
+    /// Change against the background above which a pixel is in contact: the mean over R, G, B
+    /// of |frame - background| after a box blur, grey levels.
+    pub threshold: f64,
+    /// Radius of the box blur applied to the change, pixels (JPEG and sensor noise).
+    pub blur_radius_px: usize,
+}
+
+impl Default for MaskOptions {
+    fn default() -> Self {
+        MaskOptions {
+            threshold: 10.0,
+            blur_radius_px: 2,
+        }
+    }
+}
+
+/// Mean absolute change over the channels, box-blurred (separable running sums).
+pub fn change_image(frame: &RgbImage, bg: &RgbImage, blur_radius_px: usize) -> Result<Vec<f64>> {
+    if (frame.rows, frame.cols) != (bg.rows, bg.cols) || frame.data.len() != bg.data.len() {
+        return Err(TactileError::Input(format!(
+            "frame is {} x {} but the background is {} x {} (cols x rows)",
+            frame.cols, frame.rows, bg.cols, bg.rows
+        )));
+    }
+    let (rows, cols) = (frame.rows, frame.cols);
+    let d: Vec<f64> = frame
+        .data
+        .chunks_exact(3)
+        .zip(bg.data.chunks_exact(3))
+        .map(|(a, b)| {
+            (0..3)
+                .map(|k| (f64::from(a[k]) - f64::from(b[k])).abs())
+                .sum::<f64>()
+                / 3.0
+        })
+        .collect();
+    Ok(box_blur(&d, rows, cols, blur_radius_px))
+}
+
+fn box_blur(src: &[f64], rows: usize, cols: usize, r: usize) -> Vec<f64> {
+    if r == 0 {
+        return src.to_vec();
+    }
+    let pass = |src: &[f64], along_rows: bool| -> Vec<f64> {
+        let (lines, len) = if along_rows {
+            (rows, cols)
+        } else {
+            (cols, rows)
+        };
+        let idx = |l: usize, k: usize| {
+            if along_rows {
+                l * cols + k
+            } else {
+                k * cols + l
+            }
+        };
+        let mut out = vec![0.0; src.len()];
+        let mut prefix = vec![0.0; len + 1];
+        for l in 0..lines {
+            for k in 0..len {
+                prefix[k + 1] = prefix[k] + src[idx(l, k)];
+            }
+            for k in 0..len {
+                let lo = k.saturating_sub(r);
+                let hi = (k + r + 1).min(len);
+                out[idx(l, k)] = (prefix[hi] - prefix[lo]) / (hi - lo) as f64;
+            }
+        }
+        out
+    };
+    let a = pass(src, true);
+    pass(&a, false)
+}
+
+/// The measured contact mask of a real frame: the blurred change against the background above
+/// the threshold, closed with the 15 x 15 kernel of the FEM masks and with holes filled.
+pub fn measured_mask(frame: &RgbImage, bg: &RgbImage, opts: &MaskOptions) -> Result<Mask> {
+    if !(opts.threshold > 0.0) {
+        return Err(TactileError::Input(format!(
+            "mask threshold {} grey levels is not positive",
+            opts.threshold
+        )));
+    }
+    let d = change_image(frame, bg, opts.blur_radius_px)?;
+    let raw = mask_from_fn(image_grid(frame.rows, frame.cols), |r, c| {
+        d[r * frame.cols + c] > opts.threshold
+    });
+    Ok(raw.closed(CLOSING_KERNEL_PX).filled())
+}
+
+/// A mask on the gel grid seen through the camera map: each image pixel centre takes the gel
+/// grid cell it falls in (off the grid: no contact).
+pub fn warp_mask(gel_mask: &Mask, map: &CameraMap, rows: usize, cols: usize) -> Mask {
+    let g = gel_mask.grid;
+    mask_from_fn(image_grid(rows, cols), |r, c| {
+        let p = map.to_gel([c as f64 + 0.5, r as f64 + 0.5]);
+        let gc = ((p[0] - g.origin_m[0]) / g.pixel_m).floor();
+        let gr = ((p[1] - g.origin_m[1]) / g.pixel_m).floor();
+        gc >= 0.0
+            && gr >= 0.0
+            && (gc as usize) < g.cols
+            && (gr as usize) < g.rows
+            && gel_mask.pixels[gr as usize * g.cols + gc as usize]
+    })
+}
+
+/// Mask agreement at one depth.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MaskScore {
+    /// Real frame index (depth = index x step from the start of the real sequence).
+    pub frame: usize,
+    /// FEM step compared with it (0: before first touch, an empty mask).
+    pub fem_step: usize,
+    /// Intersection over union.
+    pub iou: f64,
+    /// Centroid distance on the gel, mm (NaN when a mask is empty).
+    pub centroid_error_mm: f64,
+    /// Angle between the principal axes, rad.
+    pub rotation_error_rad: f64,
+    /// Real mask area, mm^2 on the gel.
+    pub real_area_mm2: f64,
+    /// FEM mask area, mm^2 on the gel.
+    pub fem_area_mm2: f64,
+}
+
+/// Scores one pair of image-space masks; `px_per_m` converts pixels to gel lengths.
+pub fn score_masks(real: &Mask, fem: &Mask, px_per_m: f64) -> Result<(f64, f64, f64)> {
+    let iou = metrics::iou(real, fem)?;
+    let (a, b) = (real.stats(), fem.stats());
+    let cen = metrics::centroid_error(&a, &b) / px_per_m * 1e3;
+    Ok((iou, cen, metrics::rotation_error(a.angle_rad, b.angle_rad)))
+}
+
+/// What the mask fit found.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct MaskFit {
+    /// The gel-to-image map.
+    pub map: CameraMap,
+    /// Real frame k is compared with FEM step k - offset (the real sequence starts above the gel).
+    pub offset_steps: usize,
+    /// Mean IoU on the fitting depths.
+    pub fit_iou: f64,
+}
+
+/// A mask with its pixel count and bounding box (rows, cols; inclusive), for fast IoUs.
+struct Boxed<'a> {
+    mask: &'a Mask,
+    count: usize,
+    /// [r0, r1, c0, c1]; None when empty.
+    bbox: Option<[usize; 4]>,
+}
+
+impl<'a> Boxed<'a> {
+    fn new(mask: &'a Mask) -> Self {
+        let g = mask.grid;
+        let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
+        let mut count = 0;
+        for r in 0..g.rows {
+            for c in 0..g.cols {
+                if mask.pixels[r * g.cols + c] {
+                    count += 1;
+                    r0 = r0.min(r);
+                    r1 = r1.max(r);
+                    c0 = c0.min(c);
+                    c1 = c1.max(c);
+                }
+            }
+        }
+        Boxed {
+            mask,
+            count,
+            bbox: (count > 0).then_some([r0, r1, c0, c1]),
+        }
+    }
+}
+
+/// IoU of a real image mask against a gel-grid mask seen through `map`, visiting only the
+/// pixels inside the two bounding boxes (identical to warping the whole mask first). None when
+/// both are empty.
+fn warped_iou(real: &Boxed, gel: &Boxed, map: &CameraMap) -> Option<f64> {
+    let (rows, cols) = (real.mask.grid.rows, real.mask.grid.cols);
+    let g = gel.mask.grid;
+    // Image box of the gel mask: its gel-grid box corners mapped to the image.
+    let gbox = gel.bbox.map(|[r0, r1, c0, c1]| {
+        let corners = [
+            [c0 as f64, r0 as f64],
+            [c1 as f64 + 1.0, r0 as f64],
+            [c0 as f64, r1 as f64 + 1.0],
+            [c1 as f64 + 1.0, r1 as f64 + 1.0],
+        ]
+        .map(|[c, r]| map.to_px([g.origin_m[0] + c * g.pixel_m, g.origin_m[1] + r * g.pixel_m]));
+        let lo_c = corners.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min);
+        let hi_c = corners
+            .iter()
+            .map(|p| p[0])
+            .fold(f64::NEG_INFINITY, f64::max);
+        let lo_r = corners.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
+        let hi_r = corners
+            .iter()
+            .map(|p| p[1])
+            .fold(f64::NEG_INFINITY, f64::max);
+        let cl = |v: f64, n: usize| v.clamp(0.0, n as f64 - 1.0) as usize;
+        [
+            cl(lo_r.floor() - 1.0, rows),
+            cl(hi_r.ceil() + 1.0, rows),
+            cl(lo_c.floor() - 1.0, cols),
+            cl(hi_c.ceil() + 1.0, cols),
+        ]
+    });
+    let Some([r0, r1, c0, c1]) = gbox else {
+        return (real.count > 0).then_some(0.0);
+    };
+    let (sn, cs) = map.angle_rad.sin_cos();
+    let inv = 1.0 / map.px_per_m;
+    let (mut inter, mut warped) = (0usize, 0usize);
+    for r in r0..=r1 {
+        for c in c0..=c1 {
+            let u = (c as f64 + 0.5 - map.offset_px[0]) * inv;
+            let v = (r as f64 + 0.5 - map.offset_px[1]) * inv;
+            let x = cs * u + sn * v;
+            let y = -sn * u + cs * v;
+            let y = if map.mirror { -y } else { y };
+            let gc = ((x - g.origin_m[0]) / g.pixel_m).floor();
+            let gr = ((y - g.origin_m[1]) / g.pixel_m).floor();
+            if gc >= 0.0
+                && gr >= 0.0
+                && (gc as usize) < g.cols
+                && (gr as usize) < g.rows
+                && gel.mask.pixels[gr as usize * g.cols + gc as usize]
+            {
+                warped += 1;
+                inter += usize::from(real.mask.pixels[r * cols + c]);
+            }
+        }
+    }
+    let union = real.count + warped - inter;
+    if union == 0 {
+        None
+    } else {
+        Some(inter as f64 / union as f64)
+    }
+}
+
+/// Mean IoU over pairs (real mask, FEM gel-grid mask) under `map`; pairs with both masks empty
+/// are skipped (they say nothing about the map).
+fn mean_iou(pairs: &[(Boxed, Boxed)], map: &CameraMap) -> f64 {
+    let mut s = 0.0;
+    let mut n = 0usize;
+    for (real, gel) in pairs {
+        if let Some(v) = warped_iou(real, gel, map) {
+            s += v;
+            n += 1;
+        }
+    }
+    if n == 0 { 0.0 } else { s / n as f64 }
+}
+
+/// Compass (pattern) search maximising `f` from `x0` with initial steps `step`; the IoU is
+/// piecewise constant, so no gradients. Steps halve when no move improves, until all are below
+/// `tol` times their start.
+fn compass_max(f: &dyn Fn(&[f64]) -> f64, x0: &[f64], step: &[f64], tol: f64) -> (Vec<f64>, f64) {
+    let mut x = x0.to_vec();
+    let mut fx = f(&x);
+    let mut h = step.to_vec();
+    for _ in 0..400 {
+        let mut moved = false;
+        for i in 0..x.len() {
+            for sgn in [1.0, -1.0] {
+                let mut y = x.clone();
+                y[i] += sgn * h[i];
+                let fy = f(&y);
+                if fy > fx {
+                    x = y;
+                    fx = fy;
+                    moved = true;
+                    break;
+                }
+            }
+        }
+        if !moved {
+            for (hi, si) in h.iter_mut().zip(step) {
+                *hi *= 0.5;
+                if *hi < tol * si {
+                    return (x, fx);
+                }
+            }
+        }
+    }
+    (x, fx)
+}
+
+/// Fits the gel-to-image map (scale, rotation, mirror, shift) and the step offset between the
+/// real sequence and the FEM on the frames `fit` (indices into `real`), maximising the mean
+/// mask IoU. `fem[j]` is the gel-grid mask of FEM step j + 1; real frame k pairs with step
+/// k - offset (an empty mask below 1). `offsets` lists the offsets tried. Every offset, mirror
+/// and half-turn starts from second moments and is searched on every other fitting frame; the
+/// best is refined on all of them.
+pub fn fit_map(
+    real: &[Mask],
+    fem: &[Mask],
+    fit: &[usize],
+    offsets: std::ops::RangeInclusive<usize>,
+) -> Result<MaskFit> {
+    use rayon::prelude::*;
+    let Some(gel_grid) = fem.first().map(|m| m.grid) else {
+        return Err(TactileError::Input("no FEM masks to fit against".into()));
+    };
+    let empty = mask_from_fn(gel_grid, |_, _| false);
+    let pair = |k: usize, o: usize| -> &Mask {
+        if k > o && k - o <= fem.len() {
+            &fem[k - o - 1]
+        } else {
+            &empty
+        }
+    };
+    let pairs_for = |o: usize, every: usize| -> Vec<(Boxed, Boxed)> {
+        fit.iter()
+            .filter(|&&k| k <= o + fem.len())
+            .step_by(every)
+            .map(|&k| (Boxed::new(&real[k]), Boxed::new(pair(k, o))))
+            .collect()
+    };
+    let make = |x: &[f64], mirror: bool| CameraMap {
+        px_per_m: x[0].exp(),
+        angle_rad: x[1],
+        mirror,
+        offset_px: [x[2], x[3]],
+    };
+    let mut starts = Vec::new();
+    for o in offsets {
+        let pairs = pairs_for(o, 1);
+        // Start from second moments of the deepest fitting pair with both masks present.
+        let Some((rm, gm)) = pairs.iter().rev().find(|(r, g)| r.count > 0 && g.count > 0) else {
+            continue;
+        };
+        let (rs, gs) = (rm.mask.stats(), gm.mask.stats());
+        let s0 = (rs.area_m2 / gs.area_m2).sqrt();
+        for mirror in [false, true] {
+            let ga = if mirror { -gs.angle_rad } else { gs.angle_rad };
+            for flip in [0.0, std::f64::consts::PI] {
+                let angle = rs.angle_rad - ga + flip;
+                let m0 = make(&[s0.ln(), angle, 0.0, 0.0], mirror);
+                let c = m0.to_px(gs.centroid_m);
+                let x0 = vec![
+                    s0.ln(),
+                    angle,
+                    rs.centroid_m[0] - c[0],
+                    rs.centroid_m[1] - c[1],
+                ];
+                starts.push((o, mirror, x0));
+            }
+        }
+    }
+    let step = [0.1, 0.1, 8.0, 8.0];
+    let coarse: Vec<(usize, bool, Vec<f64>, f64)> = starts
+        .into_par_iter()
+        .map(|(o, mirror, x0)| {
+            let pairs = pairs_for(o, 2);
+            let f = |x: &[f64]| mean_iou(&pairs, &make(x, mirror));
+            let (x, fx) = compass_max(&f, &x0, &step, 0.05);
+            (o, mirror, x, fx)
+        })
+        .collect();
+    let Some((o, mirror, x, _)) = coarse.into_iter().max_by(|a, b| a.3.total_cmp(&b.3)) else {
+        return Err(TactileError::Input(
+            "no fitting depth has contact in both the real frames and the FEM".into(),
+        ));
+    };
+    let pairs = pairs_for(o, 1);
+    let f = |x: &[f64]| mean_iou(&pairs, &make(x, mirror));
+    let fine_step: Vec<f64> = step.iter().map(|v| v * 0.25).collect();
+    let (x, fx) = compass_max(&f, &x, &fine_step, 0.04);
+    Ok(MaskFit {
+        map: make(&x, mirror),
+        offset_steps: o,
+        fit_iou: fx,
+    })
+}
+
+/// Scores the fitted map on the frames `score`.
+pub fn score_map(
+    real: &[Mask],
+    fem: &[Mask],
+    fit: &MaskFit,
+    score: &[usize],
+) -> Result<Vec<MaskScore>> {
+    let mut out = Vec::new();
+    let s = fit.map.px_per_m;
+    for &k in score {
+        let j = k.saturating_sub(fit.offset_steps);
+        if j > fem.len() {
+            // Deeper than the FEM ran: nothing to compare.
+            continue;
+        }
+        let w = if j >= 1 {
+            warp_mask(&fem[j - 1], &fit.map, real[k].grid.rows, real[k].grid.cols)
+        } else {
+            mask_from_fn(real[k].grid, |_, _| false)
+        };
+        if real[k].count() == 0 && w.count() == 0 {
+            continue;
+        }
+        let (iou, cen, rot) = score_masks(&real[k], &w, s)?;
+        out.push(MaskScore {
+            frame: k,
+            fem_step: j.min(fem.len()),
+            iou,
+            centroid_error_mm: cen,
+            rotation_error_rad: rot,
+            real_area_mm2: real[k].count() as f64 / (s * s) * 1e6,
+            fem_area_mm2: w.count() as f64 / (s * s) * 1e6,
+        });
+    }
+    Ok(out)
+}
+
+/// Rendered-against-real agreement at one depth.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RenderScore {
+    /// Real frame index.
+    pub frame: usize,
+    /// FEM step rendered.
+    pub fem_step: usize,
+    /// Mean absolute difference over all pixels and channels, grey levels.
+    pub l1: f64,
+    /// PSNR, dB (peak 255).
+    pub psnr_db: f64,
+    /// SSIM, mean of the R, G, B channels.
+    pub ssim: f64,
+    /// IoU of the masks measured on the rendered and on the real frame.
+    pub mask_iou: f64,
+}
+
+/// L1, PSNR, SSIM (channel mean) and measured-mask IoU of a rendered frame against a real one.
+pub fn score_frame(
+    rendered: &RgbImage,
+    real: &RgbImage,
+    bg: &RgbImage,
+    mask_opts: &MaskOptions,
+) -> Result<(f64, f64, f64, f64)> {
+    let (a, b) = (rendered.to_f64(), real.to_f64());
+    let l1 = metrics::l1(&a, &b)?;
+    let psnr = metrics::psnr(&a, &b, 255.0)?;
+    let ssim = score_ssim(rendered, real)?;
+    let iou = metrics::iou(
+        &measured_mask(rendered, bg, mask_opts)?,
+        &measured_mask(real, bg, mask_opts)?,
+    )?;
+    Ok((l1, psnr, ssim, iou))
+}
+
+/// Height smoothings tried by [`compare`], Gaussian sigma in pixels.
+pub const SMOOTHING_PX: [f32; 7] = [0.0, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0];
+
+/// SSIM of two RGB images, the mean over channels.
+pub fn score_ssim(a: &RgbImage, b: &RgbImage) -> Result<f64> {
+    let mut ssim = 0.0;
+    for ch in 0..3 {
+        ssim += metrics::ssim(&a.channel(ch), &b.channel(ch), b.rows, b.cols, 255.0)? / 3.0;
+    }
+    Ok(ssim)
+}
+
+/// Least-squares gain on the rendered intensity change: sum dS (R - B) / sum dS^2 over the
+/// given (rendered at gain 1, real) pairs, with B the common background.
+pub fn fit_gain(pairs: &[(RgbImage, &RgbImage)], bg: &RgbImage) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for (s, r) in pairs {
+        for ((&sv, &rv), &bv) in s.data.iter().zip(&r.data).zip(&bg.data) {
+            let ds = f64::from(sv) - f64::from(bv);
+            num += ds * (f64::from(rv) - f64::from(bv));
+            den += ds * ds;
+        }
+    }
+    if den > 0.0 { num / den } else { 1.0 }
+}
+
+/// Renders FEM step displacements `u` with the renderer through `sampler`.
+pub fn render_step(
+    renderer: &Renderer,
+    sampler: &SurfaceSampler,
+    u: &[[f64; 3]],
+) -> Result<RgbImage> {
+    let mut h = vec![0.0f32; sampler.rows * sampler.cols];
+    sampler.heights(u, &mut h)?;
+    renderer.render(&h, sampler.m_per_px as f32)
+}
+
+/// Images side by side with a 4-pixel white gap (all the same number of rows).
+pub fn side_by_side(images: &[&RgbImage]) -> Result<RgbImage> {
+    let Some(first) = images.first() else {
+        return Err(TactileError::Input("nothing to put side by side".into()));
+    };
+    let rows = first.rows;
+    if let Some(i) = images.iter().position(|m| m.rows != rows) {
+        return Err(TactileError::Input(format!(
+            "image {i} has {} rows, the first {rows}",
+            images[i].rows
+        )));
+    }
+    let gap = 4;
+    let cols: usize = images.iter().map(|m| m.cols).sum::<usize>() + gap * (images.len() - 1);
+    let mut data = vec![255u8; rows * cols * 3];
+    let mut c0 = 0;
+    for m in images {
+        for r in 0..rows {
+            let dst = (r * cols + c0) * 3;
+            data[dst..dst + m.cols * 3]
+                .copy_from_slice(&m.data[r * m.cols * 3..(r + 1) * m.cols * 3]);
+        }
+        c0 += m.cols + gap;
+    }
+    Ok(RgbImage { rows, cols, data })
+}
+
+/// |a - b| per channel, scaled by `gain` and clipped (a difference image that shows small errors).
+pub fn difference_image(a: &RgbImage, b: &RgbImage, gain: f64) -> RgbImage {
+    RgbImage {
+        rows: a.rows,
+        cols: a.cols,
+        data: a
+            .data
+            .iter()
+            .zip(&b.data)
+            .map(|(&x, &y)| ((f64::from(x) - f64::from(y)).abs() * gain).min(255.0) as u8)
+            .collect(),
+    }
+}
+
+/// Reads FEM step displacements `u_001.npy` .. `u_{steps}.npy` (N x 3, m) written by
+/// `ocm tactile indent`; `None` when any is missing or has the wrong node count.
+pub fn read_cached_steps(dir: &Path, steps: usize, nodes: usize) -> Option<Vec<Vec<[f64; 3]>>> {
+    (1..=steps)
+        .map(|j| {
+            let a = ocm_fem::npy::read_f64_2d(dir.join(format!("u_{j:03}.npy"))).ok()?;
+            (a.rows == nodes && a.cols == 3)
+                .then(|| a.data.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+        })
+        .collect()
+}
+
+/// The gel-grid FEM masks of each step.
+pub fn fem_masks(gel: &Gel, steps: &[Vec<[f64; 3]>]) -> Vec<Mask> {
+    let grid = Grid::for_gel(gel);
+    steps
+        .iter()
+        .map(|u| Mask::from_displacement(gel, &grid, u))
+        .collect()
+}
+
+/// Options of the whole comparison.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CompareOptions {
+    /// How real (and rendered) frames are turned into masks.
+    pub mask: MaskOptions,
+    /// Step offsets tried on each side of the first-contact estimate.
+    pub offset_window: usize,
+}
+
+impl Default for CompareOptions {
+    fn default() -> Self {
+        CompareOptions {
+            mask: MaskOptions::default(),
+            offset_window: 4,
+        }
+    }
+}
+
+/// Everything the comparison measured.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Comparison {
+    /// Frames used for fitting (even indices).
+    pub fit_frames: Vec<usize>,
+    /// Frames scored (odd indices).
+    pub score_frames: Vec<usize>,
+    /// The fitted map and step offset.
+    pub fit: MaskFit,
+    /// Offsets tried (inclusive range).
+    pub offsets_tried: [usize; 2],
+    /// Mask scores on the scored frames with contact in either mask.
+    pub masks: Vec<MaskScore>,
+    /// Gain on the rendered intensity change, fitted on the fitting frames.
+    pub gain: f64,
+    /// Height smoothing (Gaussian sigma, pixels) chosen on the fitting frames.
+    pub smooth_px: f32,
+    /// Mean SSIM on the fitting frames at that smoothing and gain.
+    pub fit_ssim: f64,
+    /// Rendered-against-real scores with the fitted gain.
+    pub render: Vec<RenderScore>,
+    /// The same with the calibration as measured (gain 1, no smoothing).
+    pub render_gain1: Vec<RenderScore>,
+    /// The baseline of rendering nothing: the background frame against each real frame.
+    pub background_only: Vec<RenderScore>,
+}
+
+/// Real frame k's FEM displacement under `offset` (None before first touch).
+fn fem_field(fields: &[Vec<[f64; 3]>], offset: usize, k: usize) -> Option<&Vec<[f64; 3]>> {
+    let j = k.checked_sub(offset)?;
+    if j >= 1 { fields.get(j - 1) } else { None }
+}
+
+/// Renders the FEM state paired with real frame `k` (the background before first touch).
+pub fn render_paired(
+    renderer: &Renderer,
+    sampler: &SurfaceSampler,
+    fields: &[Vec<[f64; 3]>],
+    offset: usize,
+    k: usize,
+) -> Result<RgbImage> {
+    match fem_field(fields, offset, k) {
+        Some(u) => render_step(renderer, sampler, u),
+        None => Ok(renderer.background()),
+    }
+}
+
+/// The FEM (`fields[j]` = displacement of step j + 1, 10 um apart) against the real frames
+/// (`frames[0]` the background, frame k at k steps from the start): masks, the map fitted on
+/// the even frames and scored on the odd ones, then rendered frames with `renderer` (whose
+/// background should be frame 0). `progress` is called with a stage name.
+pub fn compare(
+    gel: &Gel,
+    fields: &[Vec<[f64; 3]>],
+    frames: &[RgbImage],
+    renderer: &mut Renderer,
+    opts: &CompareOptions,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Comparison> {
+    let bg = &frames[0];
+    let fem = fem_masks(gel, fields);
+    let real: Vec<Mask> = frames
+        .iter()
+        .map(|f| measured_mask(f, bg, &opts.mask))
+        .collect::<Result<_>>()?;
+    let n = frames.len();
+    let fit_frames: Vec<usize> = (1..n).filter(|k| k % 2 == 0).collect();
+    let score_frames: Vec<usize> = (1..n).filter(|k| k % 2 == 1).collect();
+    let k0 = fit_frames
+        .iter()
+        .copied()
+        .find(|&k| real[k].count() > 0)
+        .ok_or_else(|| {
+            TactileError::Input(format!(
+                "no real fitting frame shows contact at threshold {} grey levels",
+                opts.mask.threshold
+            ))
+        })?;
+    let j0 = fem.iter().position(|m| m.count() > 0).ok_or_else(|| {
+        TactileError::Input("the FEM never reaches the 30 um mask threshold".into())
+    })? + 1;
+    let centre = k0.saturating_sub(j0);
+    let lo = centre.saturating_sub(opts.offset_window);
+    let hi = centre + opts.offset_window;
+    progress("fitting the gel-to-image map");
+    let fit = fit_map(&real, &fem, &fit_frames, lo..=hi)?;
+    let masks = score_map(&real, &fem, &fit, &score_frames)?;
+    progress("rendering");
+    let sampler = SurfaceSampler::new(gel, bg.rows, bg.cols, &fit.map);
+    // Smoothing and gain of the optics, fitted on the fitting frames: for each smoothing the
+    // least-squares gain, then the smoothing with the best mean SSIM.
+    let mut best: Option<(f64, f32, f64)> = None;
+    for smooth in SMOOTHING_PX {
+        renderer.smooth_px = smooth;
+        renderer.gain = 1.0;
+        let mut pairs = Vec::new();
+        for &k in &fit_frames {
+            pairs.push((
+                render_paired(renderer, &sampler, fields, fit.offset_steps, k)?,
+                &frames[k],
+            ));
+        }
+        let gain = fit_gain(&pairs, bg);
+        drop(pairs);
+        renderer.gain = gain as f32;
+        let mut ssim = 0.0;
+        for &k in &fit_frames {
+            let img = render_paired(renderer, &sampler, fields, fit.offset_steps, k)?;
+            ssim += score_ssim(&img, &frames[k])? / fit_frames.len() as f64;
+        }
+        if best.is_none_or(|b| ssim > b.0) {
+            best = Some((ssim, smooth, gain));
+        }
+    }
+    let (fit_ssim, smooth_px, gain) = best.unwrap_or((f64::NAN, 0.0, 1.0));
+    renderer.smooth_px = smooth_px;
+    let mut render = Vec::new();
+    let mut render_gain1 = Vec::new();
+    let mut background_only = Vec::new();
+    for &k in &score_frames {
+        if k.saturating_sub(fit.offset_steps) > fields.len() {
+            continue;
+        }
+        let (l1, psnr_db, ssim, mask_iou) = score_frame(bg, &frames[k], bg, &opts.mask)?;
+        background_only.push(RenderScore {
+            frame: k,
+            fem_step: 0,
+            l1,
+            psnr_db,
+            ssim,
+            mask_iou,
+        });
+        for (g, sm, sink) in [
+            (gain, smooth_px, &mut render),
+            (1.0, 0.0, &mut render_gain1),
+        ] {
+            renderer.gain = g as f32;
+            renderer.smooth_px = sm;
+            let img = render_paired(renderer, &sampler, fields, fit.offset_steps, k)?;
+            let (l1, psnr_db, ssim, mask_iou) = score_frame(&img, &frames[k], bg, &opts.mask)?;
+            sink.push(RenderScore {
+                frame: k,
+                fem_step: k.saturating_sub(fit.offset_steps).min(fields.len()),
+                l1,
+                psnr_db,
+                ssim,
+                mask_iou,
+            });
+        }
+    }
+    renderer.gain = gain as f32;
+    renderer.smooth_px = smooth_px;
+    Ok(Comparison {
+        fit_frames,
+        score_frames,
+        fit,
+        offsets_tried: [lo, hi],
+        masks,
+        gain,
+        smooth_px,
+        fit_ssim,
+        render,
+        render_gain1,
+        background_only,
+    })
+}
+
+/// Writes, for real frame `k`, `compare_KK.png` (real | rendered | 4 x |difference|) and
+/// `masks_KK.png` (the real frame in grey, red where the real mask is, green where the FEM's).
+// The inputs are those `compare` took plus its result; a bundle struct would only rename them.
+#[allow(clippy::too_many_arguments)]
+pub fn write_figures(
+    dir: &Path,
+    gel: &Gel,
+    fields: &[Vec<[f64; 3]>],
+    frames: &[RgbImage],
+    renderer: &Renderer,
+    c: &Comparison,
+    opts: &CompareOptions,
+    k: usize,
+) -> Result<Vec<String>> {
+    let bg = &frames[0];
+    let sampler = SurfaceSampler::new(gel, bg.rows, bg.cols, &c.fit.map);
+    let img = render_paired(renderer, &sampler, fields, c.fit.offset_steps, k)?;
+    let diff = difference_image(&img, &frames[k], 4.0);
+    let p1 = dir.join(format!("compare_{k:02}.png"));
+    side_by_side(&[&frames[k], &img, &diff])?.write_png(&p1)?;
+    let real = measured_mask(&frames[k], bg, &opts.mask)?;
+    let fm = match fem_field(fields, c.fit.offset_steps, k) {
+        Some(u) => {
+            let grid = Grid::for_gel(gel);
+            warp_mask(
+                &Mask::from_displacement(gel, &grid, u),
+                &c.fit.map,
+                bg.rows,
+                bg.cols,
+            )
+        }
+        None => mask_from_fn(image_grid(bg.rows, bg.cols), |_, _| false),
+    };
+    let overlay = RgbImage {
+        rows: bg.rows,
+        cols: bg.cols,
+        data: frames[k]
+            .data
+            .chunks_exact(3)
+            .zip(real.pixels.iter().zip(&fm.pixels))
+            .flat_map(|(px, (&r, &f))| {
+                let g = ((u32::from(px[0]) + u32::from(px[1]) + u32::from(px[2])) / 6) as u8;
+                [if r { 255 } else { g }, if f { 255 } else { g }, g]
+            })
+            .collect(),
+    };
+    let p2 = dir.join(format!("masks_{k:02}.png"));
+    overlay.write_png(&p2)?;
+    Ok(vec![p1.display().to_string(), p2.display().to_string()])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bounding-box IoU used by the fit equals the IoU of the fully warped mask.
+    #[test]
+    fn boxed_iou_equals_full_warp() {
+        let g = Grid {
+            origin_m: [0.0, 0.0],
+            pixel_m: 0.1e-3,
+            cols: 100,
+            rows: 80,
+        };
+        let gel_mask = mask_from_fn(g, |r, c| (20..50).contains(&c) && (30..40).contains(&r));
+        let real = mask_from_fn(image_grid(120, 160), |r, c| {
+            (r as f64 - 60.0).hypot(c as f64 - 70.0) < 25.0
+        });
+        for (angle, mirror) in [(0.0, false), (0.4, true), (2.0, false)] {
+            let map = CameraMap {
+                px_per_m: 12_000.0,
+                angle_rad: angle,
+                mirror,
+                offset_px: [40.0, if mirror { 90.0 } else { 20.0 }],
+            };
+            let full = metrics::iou(&real, &warp_mask(&gel_mask, &map, 120, 160)).unwrap();
+            let fast = warped_iou(&Boxed::new(&real), &Boxed::new(&gel_mask), &map).unwrap();
+            assert!((full - fast).abs() < 1e-12, "{full} {fast}");
+        }
+    }
+
+    /// The blur keeps a constant field and the mean of a spike; sigma 0 is the identity.
+    #[test]
+    fn gaussian_blur_conserves() {
+        use crate::optics::render::gaussian_blur;
+        let c = vec![2.5f32; 30 * 40];
+        assert!(
+            gaussian_blur(&c, 30, 40, 2.0)
+                .iter()
+                .all(|v| (v - 2.5).abs() < 1e-5)
+        );
+        let mut s = vec![0.0f32; 30 * 40];
+        s[15 * 40 + 20] = 1.0;
+        let b = gaussian_blur(&s, 30, 40, 1.5);
+        assert!((b.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+        assert!(b[15 * 40 + 20] < 0.1 && b[15 * 40 + 21] > 0.0);
+        assert_eq!(gaussian_blur(&s, 30, 40, 0.0), s);
+    }
+}

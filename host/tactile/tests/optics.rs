@@ -1,0 +1,421 @@
+//! The DIGIT renderer and the real-frame comparison: flat gel = background, a spherical dimple's
+//! slopes and gradient bins against the analytic ones, bad images and calibration files, the
+//! measured mask of a known blob, the map fit on a constructed case, and the real data.
+
+use ocm_datadir::test_data;
+use ocm_tactile::TactileError;
+use ocm_tactile::gel::{Gel, GelMaterial};
+use ocm_tactile::mask::{Grid, mask_from_fn};
+use ocm_tactile::metrics;
+use ocm_tactile::optics::render::slopes;
+use ocm_tactile::optics::{CameraMap, PolyCalib, Renderer, RgbImage, SurfaceSampler};
+use ocm_tactile::real::{self, MaskOptions};
+use std::io::Write;
+
+const BINS: usize = 125;
+
+/// A table whose R change is the magnitude bin, G the direction bin minus the flat one and B
+/// zero everywhere: a rendered image then shows the bins the renderer picked.
+fn bin_table() -> PolyCalib {
+    let mut r = vec![0.0; BINS * BINS * 6];
+    let mut g = vec![0.0; BINS * BINS * 6];
+    let b = vec![0.0; BINS * BINS * 6];
+    for i in 0..BINS {
+        for j in 0..BINS {
+            r[(i * BINS + j) * 6 + 5] = i as f64;
+            g[(i * BINS + j) * 6 + 5] = j as f64 - 62.0;
+        }
+    }
+    PolyCalib::from_tables(BINS, [&r, &g, &b], "bins").unwrap()
+}
+
+fn uniform(rows: usize, cols: usize, v: [u8; 3]) -> RgbImage {
+    RgbImage {
+        rows,
+        cols,
+        data: (0..rows * cols).flat_map(|_| v).collect(),
+    }
+}
+
+/// Spherical cap of radius `rad` pressed `depth` towards the camera at (r0, c0), heights in m on
+/// a grid of `p` m per pixel, and its analytic slopes (dh/drow, dh/dcol).
+fn dimple(
+    rows: usize,
+    cols: usize,
+    p: f64,
+    rad: f64,
+    depth: f64,
+) -> (Vec<f32>, Vec<Option<(f64, f64)>>) {
+    let (r0, c0) = (rows as f64 / 2.0, cols as f64 / 2.0);
+    let a2 = rad * rad - (rad - depth).powi(2);
+    let mut h = vec![0.0f32; rows * cols];
+    let mut g = vec![None; rows * cols];
+    for r in 0..rows {
+        for c in 0..cols {
+            let (y, x) = ((r as f64 + 0.5 - r0) * p, (c as f64 + 0.5 - c0) * p);
+            let d2 = x * x + y * y;
+            if d2 < a2 {
+                let z = (rad * rad - d2).sqrt();
+                h[r * cols + c] = (z - (rad - depth)) as f32;
+                g[r * cols + c] = Some((-y / z, -x / z));
+            }
+        }
+    }
+    (h, g)
+}
+
+/// Zero heights leave every pixel exactly at the background, with the synthetic table and with
+/// the real calibration on the real background through the real gel's sampler.
+#[test]
+fn flat_gel_renders_the_background() {
+    let bg = RgbImage {
+        rows: 24,
+        cols: 32,
+        data: (0..24 * 32 * 3).map(|i| (i * 37 % 256) as u8).collect(),
+    };
+    let r = Renderer::new(bin_table(), &bg).unwrap();
+    assert_eq!(r.render(&vec![0.0; 24 * 32], 6.25e-5).unwrap(), bg);
+    let (Some(npz), Some(frame0), Some(mesh)) = (
+        test_data("digit/optics/taxim_polycalib.npz"),
+        test_data("digit/real-frames-edge6/edge6_00.jpg"),
+        test_data("digit/DIGIT_remesh2.vtk"),
+    ) else {
+        return;
+    };
+    let bg = RgbImage::read_sized(&frame0, 240, 320).unwrap();
+    let r = Renderer::new(PolyCalib::from_npz(&npz).unwrap(), &bg).unwrap();
+    let gel = Gel::digit(&mesh, GelMaterial::default()).unwrap();
+    let s = SurfaceSampler::new(&gel, 240, 320, &CameraMap::for_grid(&Grid::for_gel(&gel)));
+    assert!(s.covered() > 240 * 320 * 9 / 10, "{}", s.covered());
+    let u = vec![[0.0; 3]; gel.num_nodes()];
+    let img = real::render_step(&r, &s, &u).unwrap();
+    assert_eq!(img, bg);
+}
+
+/// Central-difference slopes of a spherical cap (R = 4 mm, 0.5 mm deep, 31.25 um pixels) match
+/// the analytic slopes -x/z inside the cap away from its rim, and the bins the renderer picks
+/// (read back from the rendered image) are those of the analytic slopes.
+#[test]
+fn sphere_gradients_match_the_analytic_ones() {
+    let (rows, cols, p) = (120usize, 160usize, 31.25e-6);
+    let (h, g) = dimple(rows, cols, p, 4e-3, 0.5e-3);
+    let s = slopes(&h, rows, cols, p as f32).unwrap();
+    let rim = (4e-3f64.powi(2) - 3.5e-3f64.powi(2)).sqrt();
+    let mut worst = 0.0f64;
+    let mut n = 0;
+    for r in 1..rows - 1 {
+        for c in 1..cols - 1 {
+            let k = r * cols + c;
+            let (y, x) = (
+                (r as f64 + 0.5 - rows as f64 / 2.0) * p,
+                (c as f64 + 0.5 - cols as f64 / 2.0) * p,
+            );
+            if let Some((gr, gc)) = g[k]
+                && x.hypot(y) < rim - 3.0 * p
+            {
+                worst = worst
+                    .max((f64::from(s[k].0) - gr).abs())
+                    .max((f64::from(s[k].1) - gc).abs());
+                n += 1;
+            }
+        }
+    }
+    assert!(n > 5000, "{n}");
+    // Truncation error of central differences: h''' p^2 / 6 ~ 1e-4 here; f32 heights add ~1e-4.
+    assert!(worst < 2e-3, "worst slope error {worst}");
+
+    let bg = uniform(rows, cols, [100, 100, 100]);
+    let calib = bin_table();
+    let img = Renderer::new(calib.clone(), &bg)
+        .unwrap()
+        .render(&h, p as f32)
+        .unwrap();
+    let (mut same, mut total, mut far) = (0, 0, 0);
+    for r in 1..rows - 1 {
+        for c in 1..cols - 1 {
+            let k = r * cols + c;
+            let Some((gr, gc)) = g[k] else { continue };
+            let (y, x) = (
+                (r as f64 + 0.5 - rows as f64 / 2.0) * p,
+                (c as f64 + 0.5 - cols as f64 / 2.0) * p,
+            );
+            if x.hypot(y) > rim - 3.0 * p {
+                continue;
+            }
+            let want = calib.bin(gr as f32, gc as f32);
+            let (wi, wj) = (want / BINS, want % BINS);
+            let got_i = i64::from(img.data[k * 3]) - 100;
+            let got_j = i64::from(img.data[k * 3 + 1]) - 100 + 62;
+            total += 1;
+            if (got_i, got_j) == (wi as i64, wj as i64) {
+                same += 1;
+            }
+            // Direction bins wrap around at -pi/pi.
+            let dj = (got_j - wj as i64).rem_euclid(BINS as i64 - 1);
+            if (got_i - wi as i64).abs() > 1 || dj.min(BINS as i64 - 1 - dj) > 1 {
+                far += 1;
+            }
+        }
+    }
+    // Pixels whose slope lies within a bin's rounding of an edge may land next door; none further.
+    assert!(same as f64 > 0.9 * total as f64, "{same} of {total}");
+    assert_eq!(far, 0, "{far} pixels more than one bin off");
+    // Off the cap the surface is flat: exactly the background.
+    assert_eq!(&img.data[..3], &[100, 100, 100]);
+}
+
+/// Images of the wrong size or channel count and height fields of the wrong length give errors
+/// that say what is wrong.
+#[test]
+fn wrong_images_are_refused() {
+    let dir = std::env::temp_dir().join(format!("ocm-optics-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let grey = dir.join("grey.png");
+    image::GrayImage::new(320, 240).save(&grey).unwrap();
+    let e = RgbImage::read(&grey).unwrap_err().to_string();
+    assert!(e.contains("grey.png") && e.contains("1 channel"), "{e}");
+    let rgba = dir.join("rgba.png");
+    image::RgbaImage::new(320, 240).save(&rgba).unwrap();
+    let e = RgbImage::read(&rgba).unwrap_err().to_string();
+    assert!(e.contains("4 channel"), "{e}");
+    let small = dir.join("small.png");
+    image::RgbImage::new(100, 80).save(&small).unwrap();
+    let e = RgbImage::read_sized(&small, 240, 320)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("100 x 80") && e.contains("320 x 240"), "{e}");
+    let big = dir.join("big.png");
+    image::RgbImage::from_pixel(640, 480, image::Rgb([10, 20, 30]))
+        .save(&big)
+        .unwrap();
+    let half = RgbImage::read_sized(&big, 240, 320).unwrap();
+    assert_eq!(
+        (half.rows, half.cols, &half.data[..3]),
+        (240, 320, &[10, 20, 30][..])
+    );
+    let r = Renderer::new(bin_table(), &uniform(24, 32, [1, 2, 3])).unwrap();
+    let e = r.render(&[0.0; 10], 1e-4).unwrap_err().to_string();
+    assert!(e.contains("10 values") && e.contains("24 x 32"), "{e}");
+    let mut h = vec![0.0f32; 24 * 32];
+    h[40] = f32::NAN;
+    let e = r.render(&h, 1e-4).unwrap_err().to_string();
+    assert!(e.contains("row 1, col 8"), "{e}");
+    let other = uniform(20, 32, [0, 0, 0]);
+    let e = real::measured_mask(&other, &uniform(24, 32, [0, 0, 0]), &MaskOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("32 x 20") && e.contains("32 x 24"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+fn npz(entries: &[(&str, Vec<u8>)]) -> Vec<u8> {
+    let mut buf = std::io::Cursor::new(Vec::new());
+    {
+        let mut z = zip::ZipWriter::new(&mut buf);
+        let o =
+            zip::write::FileOptions::default().compression_method(zip::CompressionMethod::Stored);
+        for (name, bytes) in entries {
+            z.start_file(*name, o).unwrap();
+            z.write_all(bytes).unwrap();
+        }
+        z.finish().unwrap();
+    }
+    buf.into_inner()
+}
+
+fn npy(descr: &str, shape: &str, body: &[u8]) -> Vec<u8> {
+    let h = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}\n");
+    let mut b = b"\x93NUMPY\x01\x00".to_vec();
+    b.extend_from_slice(&(h.len() as u16).to_le_bytes());
+    b.extend_from_slice(h.as_bytes());
+    b.extend_from_slice(body);
+    b
+}
+
+/// A missing, non-zip, incomplete or mis-shaped calibration gives an error naming the file and
+/// the array; a well-formed small one loads with its values.
+#[test]
+fn bad_calibration_files_are_named() {
+    let e = PolyCalib::from_npz("/nonexistent/polycalib.npz")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("/nonexistent/polycalib.npz"), "{e}");
+    let e = PolyCalib::from_npz_bytes(b"not a zip at all", "c.npz")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("c.npz") && e.contains("zip"), "{e}");
+    let bins = npy("<i8", "()", &3i64.to_le_bytes());
+    let table: Vec<u8> = (0..54).flat_map(|i| (i as f64).to_le_bytes()).collect();
+    let t = npy("<f8", "(3, 3, 6)", &table);
+    let e = PolyCalib::from_npz_bytes(
+        &npz(&[
+            ("bins.npy", bins.clone()),
+            ("grad_r.npy", t.clone()),
+            ("grad_g.npy", t.clone()),
+        ]),
+        "c.npz",
+    )
+    .unwrap_err();
+    assert!(matches!(e, TactileError::Calibration { .. }));
+    assert!(e.to_string().contains("grad_b"), "{e}");
+    let wrong = npy("<f8", "(3, 6, 3)", &table);
+    let e = PolyCalib::from_npz_bytes(
+        &npz(&[
+            ("bins.npy", bins.clone()),
+            ("grad_r.npy", t.clone()),
+            ("grad_g.npy", wrong),
+            ("grad_b.npy", t.clone()),
+        ]),
+        "c.npz",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("grad_g") && e.contains("[3, 6, 3]"), "{e}");
+    let truncated = npy("<f8", "(3, 3, 6)", &table[..100]);
+    let e = PolyCalib::from_npz_bytes(
+        &npz(&[
+            ("bins.npy", bins.clone()),
+            ("grad_r.npy", truncated),
+            ("grad_g.npy", t.clone()),
+            ("grad_b.npy", t.clone()),
+        ]),
+        "c.npz",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("grad_r") && e.contains("truncated"), "{e}");
+    let c = PolyCalib::from_npz_bytes(
+        &npz(&[
+            ("bins.npy", bins),
+            ("grad_r.npy", t.clone()),
+            ("grad_g.npy", t.clone()),
+            ("grad_b.npy", t),
+        ]),
+        "c.npz",
+    )
+    .unwrap();
+    // Bin (1, 2), channel G, constant coefficient: element (1 * 3 + 2) * 6 + 5 = 35.
+    assert_eq!(c.eval(5, 1, &[0.0, 0.0, 0.0, 0.0, 0.0, 1.0]), 35.0);
+}
+
+/// A disc brighter than a noisy background comes back as the measured mask: IoU with the disc
+/// above 0.95 and its centroid within half a pixel.
+#[test]
+fn measured_mask_of_a_known_blob() {
+    use rand::{Rng, SeedableRng};
+    let (rows, cols) = (240, 320);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+    let bg = RgbImage {
+        rows,
+        cols,
+        data: (0..rows * cols * 3)
+            .map(|_| rng.random_range(90..110))
+            .collect(),
+    };
+    let (cr, cc, rad) = (100.0, 170.0, 30.0);
+    let inside = |r: usize, c: usize| (r as f64 + 0.5 - cr).hypot(c as f64 + 0.5 - cc) < rad;
+    let mut frame = bg.clone();
+    for r in 0..rows {
+        for c in 0..cols {
+            for ch in 0..3 {
+                let k = (r * cols + c) * 3 + ch;
+                // Noise of +-3 everywhere, +40 in the disc.
+                let n: i32 = rng.random_range(-3..=3);
+                let v = i32::from(bg.data[k]) + n + if inside(r, c) { 40 } else { 0 };
+                frame.data[k] = v.clamp(0, 255) as u8;
+            }
+        }
+    }
+    let m = real::measured_mask(&frame, &bg, &MaskOptions::default()).unwrap();
+    // The 5 x 5 box blur turns the disc's step edge into a ramp 5 pixels wide; the threshold
+    // (10 of the 40 levels, a quarter) cuts it 0.25 x 5 = 1.25 pixels outside the edge.
+    let grown = |r: usize, c: usize| (r as f64 + 0.5 - cr).hypot(c as f64 + 0.5 - cc) < rad + 1.25;
+    let truth = mask_from_fn(real::image_grid(rows, cols), grown);
+    let iou = metrics::iou(&m, &truth).unwrap();
+    assert!(iou > 0.95, "IoU {iou}");
+    let (a, b) = (m.stats(), truth.stats());
+    assert!(metrics::centroid_error(&a, &b) < 0.5);
+    // Nothing but noise: an empty mask.
+    let quiet = real::measured_mask(&bg, &bg, &MaskOptions::default()).unwrap();
+    assert_eq!(quiet.count(), 0);
+}
+
+/// Masks made by warping gel-grid ellipses through a known map are fitted back: the map and
+/// the step offset are recovered and the IoU is near 1.
+#[test]
+fn map_fit_recovers_a_known_map() {
+    let gel_grid = Grid {
+        origin_m: [0.0, 0.0],
+        pixel_m: 0.0625e-3,
+        cols: 320,
+        rows: 240,
+    };
+    let truth = CameraMap {
+        px_per_m: 1.0 / 0.07e-3,
+        angle_rad: 0.3,
+        mirror: true,
+        offset_px: [40.0, 200.0],
+    };
+    // FEM masks: an elongated ellipse growing with the step.
+    let fem: Vec<_> = (1..=30)
+        .map(|j| {
+            let a = 0.2e-3 + 0.15e-3 * j as f64;
+            let b = 0.05e-3 + 0.03e-3 * j as f64;
+            mask_from_fn(gel_grid, |r, c| {
+                let p = gel_grid.center(r, c);
+                let (x, y) = (p[0] - 8e-3, p[1] - 6e-3);
+                let (u, v) = (x * 0.8 + y * 0.6, -x * 0.6 + y * 0.8);
+                (u / a).powi(2) + (v / b).powi(2) < 1.0
+            })
+        })
+        .collect();
+    // Real frame k shows FEM step k - 3.
+    let offset = 3;
+    let real_masks: Vec<_> = (0..=30)
+        .map(|k| {
+            if k > offset {
+                real::warp_mask(&fem[k - offset - 1], &truth, 240, 320)
+            } else {
+                mask_from_fn(real::image_grid(240, 320), |_, _| false)
+            }
+        })
+        .collect();
+    let fit: Vec<usize> = (1..=30).filter(|k| k % 2 == 0).collect();
+    let score: Vec<usize> = (1..=30).filter(|k| k % 2 == 1).collect();
+    let f = real::fit_map(&real_masks, &fem, &fit, 1..=5).unwrap();
+    assert_eq!(f.offset_steps, offset);
+    assert!(f.fit_iou > 0.95, "{}", f.fit_iou);
+    let s = real::score_map(&real_masks, &fem, &f, &score).unwrap();
+    let worst = s.iter().map(|m| m.iou).fold(1.0, f64::min);
+    assert!(worst > 0.9, "{s:?}");
+    // The ellipse is symmetric, so the map is determined up to the ellipse's own symmetries: check
+    // where the ellipse centre lands and the scale.
+    let c_true = truth.to_px([8e-3, 6e-3]);
+    let c_fit = f.map.to_px([8e-3, 6e-3]);
+    assert!((c_true[0] - c_fit[0]).hypot(c_true[1] - c_fit[1]) < 1.0);
+    assert!((f.map.px_per_m / truth.px_per_m - 1.0).abs() < 0.03);
+}
+
+/// The real calibration loads with its 125 bins; the real frames load at 240 x 320; the frame
+/// before contact has an empty measured mask and the deepest a large one; the real sensor's
+/// own background reproduces under the flat gel (checked above) and the renderer changes the
+/// image only where the gel is pressed.
+#[test]
+fn real_frames_and_calibration() {
+    let (Some(npz), Some(f0)) = (
+        test_data("digit/optics/taxim_polycalib.npz"),
+        test_data("digit/real-frames-edge6/edge6_00.jpg"),
+    ) else {
+        return;
+    };
+    let c = PolyCalib::from_npz(&npz).unwrap();
+    assert_eq!(c.bins, 125);
+    let frames = real::load_frames(f0.parent().unwrap(), "edge6").unwrap();
+    assert_eq!(frames.len(), 100);
+    let bg = &frames[0];
+    let o = MaskOptions::default();
+    let first = real::measured_mask(&frames[1], bg, &o).unwrap();
+    let last = real::measured_mask(&frames[99], bg, &o).unwrap();
+    assert_eq!(first.count(), 0);
+    assert!(last.count() > 500, "{}", last.count());
+}
