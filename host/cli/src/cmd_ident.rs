@@ -3,10 +3,36 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, bail};
+use anyhow::bail;
 use ocm_ident::baseline::SeriesModel;
 use ocm_ident::synth::{Spec, generate};
 use ocm_ident::{Cause, Config, Kind, report, softarm};
+
+/// Record kinds (the column schema of the CSV).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KindArg {
+    /// An actuator pulled or pushed along its axis: time_s, pressure_kpa, strain, force_n.
+    Axial,
+    /// An actuator bent at a fixed axial strain: time_s, strain0, bend_angle_rad, moment_nm.
+    Bending,
+    /// A segment's tip pose from three chamber pressures and an axial load: time_s,
+    /// p1_kpa..p3_kpa, load_n, x_mm, y_mm, z_mm.
+    Pose,
+    /// Any system: time_s, u_<name> inputs, y_<name> measured outputs, optional sim_<name>
+    /// (a simulator's prediction) and x_<name> (its states).
+    Series,
+}
+
+impl KindArg {
+    fn kind(self) -> Kind {
+        match self {
+            KindArg::Axial => Kind::Axial,
+            KindArg::Bending => Kind::Bending,
+            KindArg::Pose => Kind::Pose,
+            KindArg::Series => Kind::Series,
+        }
+    }
+}
 
 /// Baseline of `series` records without `sim_` columns.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -19,22 +45,93 @@ pub enum SeriesBaseline {
     Static,
 }
 
+/// Effects a synthetic record can hide.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EffectArg {
+    /// A clean control: the model plus noise.
+    None,
+    /// Rate-independent memory: loading and unloading follow different paths.
+    Hysteresis,
+    /// Viscoelastic creep and relaxation: the response depends on how fast it is driven.
+    #[value(name = "rate_dependence")]
+    RateDependence,
+    /// Stiffness lost with cycles or with the largest deformation so far.
+    Softening,
+    /// The measurement lags the input (dead time and a first-order lag).
+    Latency,
+    /// A constant bias in an output or an input.
+    Offset,
+    /// A scale error of an actuator.
+    Gain,
+    /// A static mismatch that none of the others explains (stiffening).
+    Nonlinearity,
+}
+
+impl EffectArg {
+    fn cause(self) -> Cause {
+        match self {
+            EffectArg::None => Cause::None,
+            EffectArg::Hysteresis => Cause::Hysteresis,
+            EffectArg::RateDependence => Cause::RateDependence,
+            EffectArg::Softening => Cause::Softening,
+            EffectArg::Latency => Cause::Latency,
+            EffectArg::Offset => Cause::Offset,
+            EffectArg::Gain => Cause::Gain,
+            EffectArg::Nonlinearity => Cause::Nonlinearity,
+        }
+    }
+}
+
+/// Subcommands of `ocm ident`.
+#[derive(clap::Subcommand, Debug)]
+pub enum IdentCommand {
+    /// Write a synthetic record with a hidden effect (a test input for `ocm ident`); refuses
+    /// to overwrite an existing file.
+    Synth(SynthArgs),
+}
+
+/// Arguments of `ocm ident synth`.
+#[derive(clap::Args, Debug)]
+pub struct SynthArgs {
+    /// The CSV to write (in the kind's schema, units in the column names); must not exist.
+    pub out: PathBuf,
+    /// Record kind.
+    #[arg(long, value_enum, default_value_t = KindArg::Axial)]
+    pub kind: KindArg,
+    /// The hidden effect (`none` for a clean control). Not every kind can hide every effect:
+    /// the baseline's free parameters absorb some (an offset or a gain of a series map).
+    #[arg(long, value_enum, default_value_t = EffectArg::None)]
+    pub effect: EffectArg,
+    /// Rows of the record.
+    #[arg(long, default_value_t = 4000)]
+    pub rows: usize,
+    /// Seed: the same seed writes the same record.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
 /// Arguments of `ocm ident`.
 #[derive(clap::Args, Debug)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct IdentArgs {
+    /// Write a synthetic record instead of identifying one.
+    #[command(subcommand)]
+    pub command: Option<IdentCommand>,
     /// Measured data: a CSV in the kind's schema, or the soft-arm MATLAB file (`.mat`).
     ///
-    /// Schema conventions: axial force_n tension positive; pose x_mm, y_mm, z_mm in the base
-    /// frame of a standing segment with z from base to tip (rotate a hanging mount's log
-    /// first), load_n axial tension; series u_<name> inputs, y_<name> measured outputs, and
-    /// optionally sim_<name> (another simulator's prediction of y_<name>: then ident explains
-    /// measured minus simulated) and x_<name> (its states, e.g. a position whose velocity
-    /// friction follows). Units come from the name's suffix (_n, _m, _mm, _kpa, _pa, _rad, _s).
-    /// A record that contradicts the conventions gets a warning in the report.
-    pub file: PathBuf,
-    /// Record kind: axial, bending, pose or series (a `.mat` file is always series).
-    #[arg(long, default_value = "series")]
-    pub kind: String,
+    /// Schema conventions: axial force_n tension positive, strain extension positive, gauge
+    /// pressures inflation positive; pose x_mm, y_mm, z_mm in the base frame of a standing
+    /// segment with z from base to tip (rotate a hanging mount's log first), load_n axial
+    /// tension; series u_<name> inputs, y_<name> measured outputs, and optionally sim_<name>
+    /// (another simulator's prediction of y_<name>: then ident explains measured minus
+    /// simulated) and x_<name> (its states, e.g. a position whose velocity friction follows).
+    /// Units come from the name's suffix (_n, _nm, _m, _mm, _kpa, _pa, _bar, _rad, _deg, _s,
+    /// _v). A record that contradicts the conventions gets a warning in the report.
+    #[arg(required = true)]
+    pub file: Option<PathBuf>,
+    /// Record kind (a `.mat` file is always series).
+    #[arg(long, value_enum, default_value_t = KindArg::Series)]
+    pub kind: KindArg,
     /// Baseline of a `series` record without sim_ columns (a .mat soft-arm file is static).
     #[arg(long, value_enum, default_value_t = SeriesBaseline::StateSpace)]
     pub baseline: SeriesBaseline,
@@ -44,65 +141,80 @@ pub struct IdentArgs {
     /// Write report.md, report.json and plots into this folder.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Family-wise significance of the false-discovery guard.
+    /// Family-wise significance of the false-discovery guard: the chance of naming a cause
+    /// in a record that has none, shared among the candidates.
     #[arg(long, default_value_t = 0.01)]
     pub alpha: f64,
     /// Smallest held-out RMSE gain (percent) for a cause to be named.
     #[arg(long, default_value_t = 2.0)]
     pub min_gain: f64,
-    /// Instead of identifying, write a synthetic record to FILE with this hidden effect
-    /// (a cause name, or `none` for a clean control), then exit.
-    #[arg(long, value_name = "CAUSE")]
-    pub synthesize: Option<String>,
-    /// Rows of the synthetic record.
-    #[arg(long, default_value_t = 4000)]
-    pub rows: usize,
-    /// Seed of the synthetic record.
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
+}
+
+/// Runs `ocm ident synth`.
+fn synth(args: SynthArgs) -> anyhow::Result<()> {
+    if args.out.exists() {
+        bail!(
+            "{} exists: ocm ident synth does not overwrite files (remove it or choose another name)",
+            args.out.display()
+        );
+    }
+    if args.rows < 100 {
+        bail!("--rows must be at least 100, got {}", args.rows);
+    }
+    let kind = args.kind.kind();
+    let cause = args.effect.cause();
+    let effects = if cause == Cause::None {
+        vec![]
+    } else {
+        if !ocm_ident::synth::hideable(kind).contains(&cause) {
+            bail!(
+                "a {} record cannot hide `{}` (its baseline's free parameters absorb it); effects it can hide: {}",
+                kind.name(),
+                cause.name(),
+                ocm_ident::synth::hideable(kind)
+                    .iter()
+                    .map(|c| c.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
+        vec![cause]
+    };
+    let g = generate(&Spec {
+        kind,
+        effects,
+        seed: args.seed,
+        rows: args.rows,
+        ratio: (3.0, 6.0),
+    });
+    ocm_ident::data::write_csv(&g.record, &args.out)?;
+    eprintln!(
+        "wrote {} ({} rows, hidden {:?}, visible effect / noise {:?}, {:?})",
+        args.out.display(),
+        g.record.len(),
+        g.effects.iter().map(|c| c.name()).collect::<Vec<_>>(),
+        g.ratios,
+        g.details
+    );
+    Ok(())
 }
 
 /// Runs `ocm ident`.
 pub fn run(args: IdentArgs) -> anyhow::Result<()> {
-    let is_mat = args
-        .file
+    if let Some(IdentCommand::Synth(s)) = args.command {
+        return synth(s);
+    }
+    let Some(file) = args.file else {
+        bail!("ocm ident needs a FILE to identify (or the `synth` subcommand)");
+    };
+    let is_mat = file
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("mat"));
     let kind = if is_mat {
         Kind::Series
     } else {
-        Kind::parse(&args.kind).with_context(|| {
-            format!(
-                "unknown kind `{}` (axial, bending, pose, series)",
-                args.kind
-            )
-        })?
+        args.kind.kind()
     };
-    if let Some(name) = &args.synthesize {
-        let cause = Cause::from_name(name).with_context(|| format!("unknown cause `{name}`"))?;
-        let effects = if cause == Cause::None {
-            vec![]
-        } else {
-            vec![cause]
-        };
-        let g = generate(&Spec {
-            kind,
-            effects,
-            seed: args.seed,
-            rows: args.rows,
-            ratio: (3.0, 6.0),
-        });
-        ocm_ident::data::write_csv(&g.record, &args.file)?;
-        eprintln!(
-            "wrote {} ({} rows, hidden {:?}, visible effect / noise {:?}, {:?})",
-            args.file.display(),
-            g.record.len(),
-            g.effects.iter().map(|c| c.name()).collect::<Vec<_>>(),
-            g.ratios,
-            g.details
-        );
-        return Ok(());
-    }
     if !(args.alpha > 0.0 && args.alpha < 1.0) {
         bail!("--alpha must be in (0, 1), got {}", args.alpha);
     }
@@ -113,9 +225,9 @@ pub fn run(args: IdentArgs) -> anyhow::Result<()> {
         );
     }
     let record = if is_mat {
-        softarm::load(&args.file)?
+        softarm::load(&file)?
     } else {
-        ocm_ident::data::read_csv(&args.file, kind)?
+        ocm_ident::data::read_csv(&file, kind)?
     };
     let series_model = match args.baseline {
         // the soft arm is read as quasi-static, its published figures are on that baseline

@@ -314,6 +314,12 @@ impl Baseline {
                 regressors.push(vec![1.0; n]);
                 names.push(format!("d[{c}]"));
                 stiffness.push(false);
+                // after `d`: the extensions index `C` and `D` from the front
+                for (j, f) in ss.free_responses(starts, n).into_iter().enumerate() {
+                    regressors.push(f);
+                    names.push(format!("initial-state response {j} of y[{c}]"));
+                    stiffness.push(false);
+                }
                 Design {
                     fixed: vec![0.0; n],
                     nonneg: vec![false; regressors.len()],

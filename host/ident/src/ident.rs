@@ -75,6 +75,9 @@ pub struct Report {
     pub diagnostics: Vec<Diagnostic>,
     /// Where the baseline residual is largest, per output channel.
     pub hotspots: Vec<Hotspot>,
+    /// Direction tests: does the residual flip with the direction of motion at equal inputs
+    /// (friction) or not (a static map of the inputs)? Records with a state only.
+    pub direction_tests: Vec<crate::direction::DirectionTest>,
     /// Selection settings.
     pub config: Config,
 }
@@ -370,6 +373,7 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
             .collect(),
         diagnostics,
         hotspots,
+        direction_tests: sel.direction.clone(),
         config: *cfg,
     };
     Ok(Identification {

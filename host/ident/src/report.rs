@@ -64,6 +64,21 @@ pub fn text(r: &Report) -> String {
         "  noise RMS estimated from the data: {:.3e} {u} ({})\n",
         r.noise_rmse, r.noise_method
     ));
+    for t in &r.direction_tests {
+        s.push_str(&format!(
+            "  direction test ({} against the motion of {}): {:+.4e} {u} +- {:.1e} at equal inputs over {} cells, {}\n",
+            t.output,
+            t.state,
+            t.effect,
+            t.std_err,
+            t.cells,
+            if t.flips {
+                "flips with the direction (friction, not a static map of the inputs)"
+            } else {
+                "no flip"
+            }
+        ));
+    }
     s.push_str(&format!("\ncause(s): {}\n", causes_line(r)));
     s.push_str(&format!("verdict: {}\n", r.verdict));
     for w in &r.warnings {

@@ -26,6 +26,7 @@ use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
 use crate::baseline::SeriesModel;
 use crate::cause::Cause;
+use crate::direction::{DirectionTest, direction_tests};
 use crate::extension::{Prepared, SetFit, channel_scale};
 
 /// Selection settings.
@@ -219,6 +220,9 @@ pub struct Selection {
     pub extended: SetFit,
     /// Scores of every further cause tried against the current extension.
     pub steps: Vec<Candidate>,
+    /// The direction tests (friction against a static map of the inputs), records with a
+    /// state only.
+    pub direction: Vec<DirectionTest>,
 }
 
 /// Runs the candidates and the greedy multi-cause search.
@@ -237,15 +241,31 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
         .enumerate()
         .filter(|(_, c)| c.accepted)
         .max_by(|a, b| a.1.score.total_cmp(&b.1.score));
-    let Some((bi, _)) = best else {
+    let direction = direction_tests(prep);
+    let Some((mut bi, _)) = best else {
         return Selection {
             causes: vec![Cause::None],
             candidates,
             extended: base.clone(),
             baseline: base,
             steps: Vec::new(),
+            direction,
         };
     };
+    // The residual flips with the direction of motion at equal inputs: a static map of the
+    // inputs cannot be the first cause, friction is (when it passes on its own); the map may
+    // still follow as a second cause under the usual tests. Friction is then kept through
+    // the swaps and the backward check.
+    let flips = direction.iter().any(|t| t.flips);
+    let friction_at = pool.iter().position(|&c| c == Cause::Friction);
+    if flips
+        && pool[bi] == Cause::Nonlinearity
+        && let Some(fi) = friction_at
+        && candidates[fi].accepted
+    {
+        bi = fi;
+    }
+    let pinned = |c: Cause| flips && c == Cause::Friction;
     let mut current = singles[bi].clone();
     let mut causes = vec![pool[bi]];
     let mut steps = Vec::new();
@@ -297,6 +317,9 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
     for _ in 0..2 {
         let mut improved = false;
         for i in 0..causes.len() {
+            if pinned(causes[i]) {
+                continue;
+            }
             let cur_bic = bic(&current);
             let cur_k = current.extra_params;
             let mut best_swap: Option<(f64, Vec<Cause>, SetFit)> = None;
@@ -337,6 +360,9 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
     while causes.len() > 1 {
         let mut weakest: Option<(f64, usize, SetFit)> = None;
         for i in 0..causes.len() {
+            if pinned(causes[i]) {
+                continue;
+            }
             let mut rest = causes.clone();
             rest.remove(i);
             let f = prep.fit_set(&rest);
@@ -360,5 +386,6 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
         baseline: base,
         extended: current,
         steps,
+        direction,
     }
 }

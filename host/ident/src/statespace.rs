@@ -18,8 +18,12 @@ use crate::signal;
 
 /// Largest order tried.
 pub const MAX_ORDER: usize = 5;
-/// Block rows of the Hankel matrices (past and future horizons).
-const HORIZON: usize = 10;
+/// Block rows of the Hankel matrices (past and future horizons), the longest that the
+/// training windows allow first. The horizon must span a good part of the slowest mode's
+/// period: with 10 block rows at 100 Hz a 0.5-2 Hz oscillator's observability estimate is
+/// noise, and the refinement then starts far off (two-mass oscillators stopped at 4-10 % of
+/// the static map's error, against 0.5 % with 30 block rows).
+const HORIZONS: [usize; 3] = [30, 20, 10];
 /// Most Hankel columns used (evenly thinned): enough for the subspace step, which the
 /// free-run refinement then corrects on every training row.
 const MAX_COLUMNS: usize = 6000;
@@ -59,6 +63,13 @@ impl StateSpace {
             .collect();
         let cols: Vec<&[f64]> = du.iter().map(|v| v.as_slice()).collect();
         simulate(&self.a, &self.b, &cols, starts, rows, n)
+    }
+
+    /// The free responses from each segment's initial state (see [`free_response_basis`]):
+    /// regressors beside the states, so that a record that does not start at rest is not a
+    /// transient misfit. Their coefficients are the initial state, fitted on training rows only.
+    pub fn free_responses(&self, starts: &[usize], rows: usize) -> Vec<Vec<f64>> {
+        free_response_basis(&self.a, starts, rows)
     }
 
     /// The response of an output with map `(c_row, d_k)` to a signal `f` entering the dynamics
@@ -122,8 +133,13 @@ impl StateSpace {
         };
         let n_obs = scored.iter().filter(|s| **s).count() * outputs.len();
         let k_out = outputs.len() * (m + 1);
+        // segments whose initial state the training rows fit (see `free_response_basis`)
+        let fitted_starts = signal::segments(starts, rows)
+            .iter()
+            .filter(|(s, e)| (*s..*e).any(|i| scored[i]))
+            .count();
         let bic = |rss: f64, n: usize| {
-            let k = n * (m + outputs.len()) + k_out;
+            let k = n * (m + outputs.len()) + k_out + n * fitted_starts * outputs.len();
             n_obs as f64 * (rss / n_obs.max(1) as f64).max(1e-300).ln()
                 + k as f64 * (n_obs.max(2) as f64).ln()
         };
@@ -138,7 +154,9 @@ impl StateSpace {
             DMatrix::zeros(0, 0),
             DMatrix::zeros(0, m),
         );
-        let gamma = observability(&du_ref, outputs, starts, train);
+        let gamma = HORIZONS
+            .iter()
+            .find_map(|&h| observability(&du_ref, outputs, starts, train, h));
         for n in 1..=MAX_ORDER {
             let Some((a, b)) = gamma.as_ref().and_then(|(g, p)| initial_ab(g, *p, n, &ctx)) else {
                 break;
@@ -215,6 +233,74 @@ fn simulate(
     out
 }
 
+/// For each segment, an orthonormal basis of the sequences `c A^k x0` (k counted from the
+/// segment's start, zero outside it) that any output row `c` and initial state `x0` give: by
+/// Cayley-Hamilton they span at most `n` dimensions, and the `n` sequences `w A^k e_j` of one
+/// generic row `w` span them when `(A, w)` is observable (Gram-Schmidt drops the dependent
+/// ones otherwise). A record rarely starts at rest (the generator's oscillators start at zero
+/// displacement under a non-zero force, a real rig wherever it was left); without these
+/// columns the decaying transient is misfit that the refinement trades against the dynamics.
+pub fn free_response_basis(a: &DMatrix<f64>, starts: &[usize], rows: usize) -> Vec<Vec<f64>> {
+    let n = a.nrows();
+    let mut out = Vec::new();
+    if n == 0 {
+        return out;
+    }
+    // row-major A for the row-vector recursion r <- r A
+    let af: Vec<f64> = (0..n * n).map(|t| a[(t / n, t % n)]).collect();
+    for (s, e) in signal::segments(starts, rows) {
+        let len = e - s;
+        let mut seq = vec![vec![0.0; len]; n];
+        // a generic row: irrational-looking, alternating weights
+        let mut r: Vec<f64> = (0..n)
+            .map(|j| (1.0 + 0.618 * j as f64) * if j % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let mut next = vec![0.0; n];
+        let r0 = r.iter().map(|v| v.abs()).fold(0.0, f64::max);
+        for k in 0..len {
+            for j in 0..n {
+                seq[j][k] = r[j];
+            }
+            let big = r.iter().map(|v| v.abs()).fold(0.0, f64::max);
+            // a decayed transient: the remaining rows stay zero
+            if big < 1e-13 * r0 || !big.is_finite() {
+                break;
+            }
+            for (j, nj) in next.iter_mut().enumerate() {
+                *nj = (0..n).map(|l| r[l] * af[l * n + j]).sum();
+            }
+            std::mem::swap(&mut r, &mut next);
+        }
+        let mut basis: Vec<Vec<f64>> = Vec::new();
+        for v in seq {
+            let norm0 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if norm0 <= 0.0 || !norm0.is_finite() {
+                continue;
+            }
+            let mut w = v;
+            // modified Gram-Schmidt, twice for orthogonality in floating point
+            for _ in 0..2 {
+                for b in &basis {
+                    let d: f64 = w.iter().zip(b).map(|(x, y)| x * y).sum();
+                    for (x, y) in w.iter_mut().zip(b) {
+                        *x -= d * y;
+                    }
+                }
+            }
+            let norm = w.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if norm > 1e-7 * norm0 {
+                basis.push(w.iter().map(|x| x / norm).collect());
+            }
+        }
+        for b in basis {
+            let mut col = vec![0.0; rows];
+            col[s..e].copy_from_slice(&b);
+            out.push(col);
+        }
+    }
+    out
+}
+
 /// Everything the free-run error of an `(A, B)` pair needs.
 struct FitContext<'a> {
     du: &'a [&'a [f64]],
@@ -237,9 +323,11 @@ impl FitContext<'_> {
             return None;
         }
         let ones = vec![1.0; rows];
+        let free = free_response_basis(a, self.starts, rows);
         let mut cols: Vec<&[f64]> = x.iter().map(|s| s.as_slice()).collect();
         cols.extend(self.inputs.iter().copied());
         cols.push(&ones);
+        cols.extend(free.iter().map(|v| v.as_slice()));
         let mut res = Vec::new();
         for y in self.outputs {
             let fit = crate::lsq::fit(&cols, y, self.train, &[]);
@@ -341,8 +429,9 @@ fn observability(
     outputs: &[&[f64]],
     starts: &[usize],
     train: &[bool],
+    horizon: usize,
 ) -> Option<(DMatrix<f64>, usize)> {
-    let (m, p, s) = (du.len(), outputs.len(), HORIZON);
+    let (m, p, s) = (du.len(), outputs.len(), horizon);
     let rows = train.len();
     // windows of 2s rows inside one segment and inside the training rows
     let mut valid = Vec::new();
@@ -452,9 +541,11 @@ fn initial_ab(
             }
         }
     }
-    // stacked least squares over the outputs (shared B), with per-output D and constant
+    // stacked least squares over the outputs (shared B), with per-output D, constant and
+    // initial state
+    let free = free_response_basis(&a, ctx.starts, rows_n);
     let nb = n * m;
-    let extra = m + 1;
+    let extra = m + 1 + free.len();
     let np = nb + p * extra;
     let mut gm = DMatrix::<f64>::zeros(np, np);
     let mut rhs = DVector::<f64>::zeros(np);
@@ -469,6 +560,10 @@ fn initial_ab(
         }
         cols.push(&ones);
         idx.push(nb + o * extra + m);
+        for (f, col) in free.iter().enumerate() {
+            cols.push(col);
+            idx.push(nb + o * extra + m + 1 + f);
+        }
         let y = ctx.outputs[o];
         for (ca, &ia) in cols.iter().zip(&idx) {
             rhs[ia] += train_rows.iter().map(|&t| ca[t] * y[t]).sum::<f64>();
@@ -542,24 +637,30 @@ mod tests {
         let y: Vec<f64> = y.iter().map(|v| v + nd.sample(&mut rng)).collect();
         let train: Vec<bool> = (0..rows).map(|i| i < 2100).collect();
         let ss = StateSpace::identify(&[&u], &[&y], &[0], &train);
-        // the true order is 2; the criterion may add a state or two that it resolves
-        assert!((2..=4).contains(&ss.order()), "orders {:?}", ss.orders);
+        // the true order is 2; the criterion may add a state that it resolves
+        assert!((2..=3).contains(&ss.order()), "orders {:?}", ss.orders);
         let x = ss.states(&[&u], &[0]);
         let ones = vec![1.0; rows];
+        let free = ss.free_responses(&[0], rows);
         let mut cols: Vec<&[f64]> = x.iter().map(|s| s.as_slice()).collect();
         cols.push(&u);
         cols.push(&ones);
+        cols.extend(free.iter().map(|v| v.as_slice()));
         let fit = crate::lsq::fit(&cols, &y, &train, &[]);
         let p = crate::lsq::predict(&cols, &fit.coef, rows);
         let e: Vec<f64> = (2100..rows).map(|i| y[i] - p[i]).collect();
         let rmse = crate::signal::rms(&e);
-        // the static map (order 0) misses by its free-run RMSE; the dynamic model must be
-        // an order of magnitude better on held-out rows (measured: 0.04 of it; the refinement
-        // stops above the noise, see the README)
-        let static_rmse = ss.orders[0].1;
+        // A record that does not start at rest: without the initial-state responses the
+        // decaying transient biased the output map and the held-out error was 18.6x the noise;
+        // with them it is at the noise (measured 0.96x).
+        eprintln!(
+            "held-out free-run RMSE {rmse:.3e} = {:.2} x noise, orders {:?}",
+            rmse / sd,
+            ss.orders
+        );
         assert!(
-            rmse < 0.1 * static_rmse,
-            "held-out free-run RMSE {rmse} vs static {static_rmse}, noise {sd}"
+            rmse < 1.5 * sd,
+            "held-out free-run RMSE {rmse} vs noise {sd}"
         );
     }
 }

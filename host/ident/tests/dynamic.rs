@@ -15,47 +15,72 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
         series_model: SeriesModel::StateSpace,
         ..Config::default()
     };
+    let cases: Vec<(System, Cause, u64)> = [System::Oscillator1, System::Oscillator2]
+        .into_iter()
+        .flat_map(|system| {
+            std::iter::once(Cause::None)
+                .chain(EFFECTS)
+                .flat_map(move |effect| (0..seeds).map(move |seed| (system, effect, seed)))
+        })
+        .collect();
+    // two workers (the records are independent): half the wall-clock time on two cores
+    let outcomes: Vec<(Cause, bool)> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..2)
+            .map(|w| {
+                let cases = &cases;
+                let cfg = &cfg;
+                scope.spawn(move || {
+                    cases
+                        .iter()
+                        .skip(w)
+                        .step_by(2)
+                        .map(|&(system, effect, seed)| {
+                            let g = generate(&DynSpec {
+                                system,
+                                effect,
+                                seed: 1000 + seed,
+                                rows: 2000,
+                            });
+                            let id = identify(&g.record, cfg).unwrap();
+                            let r = &id.report;
+                            let ok = r.causes == [effect];
+                            eprintln!(
+                                "{system:?} {effect} seed {seed}: named {:?} ({}), ratio {:.1}, gain {:.1} %, {}",
+                                r.causes,
+                                if ok { "ok" } else { "MISS" },
+                                g.ratio,
+                                r.gain_pct,
+                                g.details
+                            );
+                            (effect, ok)
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        workers
+            .into_iter()
+            .flat_map(|h| h.join().expect("a battery worker panicked"))
+            .collect()
+    });
     let mut correct = 0;
     let mut total = 0;
     let mut false_alarms = 0;
-    for system in [System::Oscillator1, System::Oscillator2] {
-        for effect in std::iter::once(Cause::None).chain(EFFECTS) {
-            for seed in 0..seeds {
-                let g = generate(&DynSpec {
-                    system,
-                    effect,
-                    seed: 1000 + seed,
-                    rows: 2000,
-                });
-                let id = identify(&g.record, &cfg).unwrap();
-                let r = &id.report;
-                let ok = r.causes == [effect];
-                eprintln!(
-                    "{system:?} {effect} seed {seed}: named {:?} ({}), ratio {:.1}, gain {:.1} %, {}",
-                    r.causes,
-                    if ok { "ok" } else { "MISS" },
-                    g.ratio,
-                    r.gain_pct,
-                    g.details
-                );
-                if effect == Cause::None {
-                    false_alarms += usize::from(!ok);
-                } else {
-                    total += 1;
-                    correct += usize::from(ok);
-                }
-            }
+    for (effect, ok) in outcomes {
+        if effect == Cause::None {
+            false_alarms += usize::from(!ok);
+        } else {
+            total += 1;
+            correct += usize::from(ok);
         }
     }
     eprintln!("dynamic battery: {correct} / {total} correct, {false_alarms} false alarms");
-    // regression bounds of the measured figures (3 seeds: 11 of 18 correct, 1 false alarm of
-    // 6 clean records); the goals (95 %, none) are not reached, see the README
+    // regression bounds of the measured figures (3 seeds: 16 of 18 correct, no false alarm on
+    // 6 clean records; 10 seeds: 50 of 60, none on 20); the 95 % is not reached, see
+    // the README
     assert!(total > 0);
-    assert!(
-        false_alarms * 6 <= seeds as usize * 2,
-        "{false_alarms} false alarms"
-    );
-    assert!(correct * 100 >= 55 * total, "{correct} / {total}");
+    assert_eq!(false_alarms, 0, "{false_alarms} false alarms");
+    assert!(correct * 100 >= 75 * total, "{correct} / {total}");
 }
 
 /// The speed figure of a 100k-row dynamic record (no assertion on time: run it with

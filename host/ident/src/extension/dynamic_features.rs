@@ -10,7 +10,135 @@ use crate::cause::Cause;
 use crate::signal;
 use crate::statespace::StateSpace;
 
+/// A signal of the model's own output that enters the dynamics where an input force does;
+/// evaluated step by step, so that the in-loop fit ([`super::in_loop`]) can feed the extended
+/// model's output back into it.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum LoopSignal {
+    /// Stop operator of half-width `r`, normalised: `(y - play_r(y)) / r` (an
+    /// elastic-perfectly-plastic element; the weight is its force when sliding).
+    Stop(f64),
+    /// Smoothed sign of the velocity, `tanh(v / v0)` (Coulomb friction).
+    Sign(f64),
+    /// Velocity over a scale, `v / vs` (viscous friction).
+    Viscous(f64),
+    /// Stribeck peak, `tanh(v / v0) exp(-(v / vs)^2)`.
+    Stribeck(f64, f64),
+    /// Power of the centred output, `((y - m) / r)^p`.
+    Power(f64, f64, i32),
+    /// Mixed term of output and velocity, `((y - m) / r)^p (v / vs)^q`.
+    Mixed(f64, f64, f64, i32, i32),
+}
+
+impl LoopSignal {
+    /// The signal at output `y` and velocity `v`; `play` is the stop operator's state.
+    pub(super) fn eval(&self, y: f64, v: f64, play: &mut f64) -> f64 {
+        match *self {
+            LoopSignal::Stop(r) => {
+                *play = play.clamp(y - r, y + r);
+                (y - *play) / r
+            }
+            LoopSignal::Sign(v0) => (v / v0).tanh(),
+            LoopSignal::Viscous(vs) => v / vs,
+            LoopSignal::Stribeck(v0, vs) => (v / v0).tanh() * (-(v / vs).powi(2)).exp(),
+            LoopSignal::Power(m, r, p) => ((y - m) / r).powi(p),
+            LoopSignal::Mixed(m, r, vs, p, q) => ((y - m) / r).powi(p) * (v / vs).powi(q),
+        }
+    }
+}
+
 impl Prepared<'_> {
+    /// The signals of `cause` inside the dynamics of channel `c`, with their names, or `None`
+    /// when the cause acts at the output.
+    pub(super) fn loop_signals(&self, cause: Cause, c: usize) -> Option<Vec<(LoopSignal, String)>> {
+        let x = &self.channels[c].yhat;
+        let name = &self.rec.outputs[c].name;
+        let mut signals = Vec::new();
+        // The most flexible variant of each (while a further cause is tested against it):
+        // hysteresis with a near-zero width (a stop operator that saturates at once is a dry
+        // friction force), friction with pre-sliding (narrow stop operators: the force follows
+        // the displacement elastically before it slides, as in LuGre's bristles), stiffening
+        // to the fifth power.
+        let rich = self.flexible.get() == Some(cause);
+        match cause {
+            Cause::Hysteresis => {
+                // elastic-perfectly-plastic elements (stop operators) on the displacement:
+                // a Prandtl-Ishlinskii restoring force
+                // Loops wider than friction's pre-sliding: the narrowest play width (0.5 % of
+                // the range) is left to friction, whose force saturates within it; without this
+                // cut Bouc-Wen and LuGre records were confused both ways (about 1 in 5).
+                let range = span(x);
+                let narrow: &[f64] = if rich { &[0.0005, 0.002, 0.005] } else { &[] };
+                for &w in narrow.iter().chain(&PLAY_WIDTHS[1..]) {
+                    let r = w * range;
+                    signals.push((
+                        LoopSignal::Stop(r),
+                        format!("stop operator r={r:.4} on {name}"),
+                    ));
+                }
+            }
+            Cause::Friction => {
+                let (_, v0) = self.model_velocity(c);
+                let vs = 5.0 * v0;
+                signals.push((
+                    LoopSignal::Sign(v0),
+                    format!("Coulomb friction from d{name}/dt (model)"),
+                ));
+                signals.push((
+                    LoopSignal::Viscous(vs),
+                    format!("viscous friction at {vs:.4} /s of {name}"),
+                ));
+                signals.push((
+                    LoopSignal::Stribeck(v0, vs),
+                    format!("Stribeck peak of d{name}/dt"),
+                ));
+                // the direction of motion held while the mass sticks: an elastic-plastic
+                // element with 0.5 % of the stroke as pre-sliding (as for a simulator's state)
+                let range = span(x);
+                let r = 0.005 * range;
+                signals.push((
+                    LoopSignal::Stop(r),
+                    format!("Coulomb friction with pre-sliding r={r:.4} on {name}"),
+                ));
+                if rich {
+                    for w in [0.015, 0.035] {
+                        let r = w * range;
+                        signals.push((
+                            LoopSignal::Stop(r),
+                            format!("pre-sliding r={r:.4} on {name}"),
+                        ));
+                    }
+                }
+            }
+            Cause::Nonlinearity => {
+                // stiffening of the restoring force: quadratic and cubic in the displacement
+                let (m, _) = signal::mean_std(x);
+                let r = 0.5 * span(x);
+                let powers: &[i32] = if rich { &[2, 3, 4, 5] } else { &[2, 3] };
+                for &p in powers {
+                    signals.push((
+                        LoopSignal::Power(m, r, p),
+                        format!("restoring force ({name} - mean)^{p}"),
+                    ));
+                }
+                if rich {
+                    // a stiffening where the output is not the deformed element (a second
+                    // mass): the complete cubic in output and velocity
+                    let (_, v0) = self.model_velocity(c);
+                    let vs = 20.0 * v0;
+                    for (p, q) in [(1, 1), (2, 1), (1, 2), (0, 3)] {
+                        signals.push((
+                            LoopSignal::Mixed(m, r, vs, p, q),
+                            format!("({name} - mean)^{p} (d{name}/dt)^{q}"),
+                        ));
+                    }
+                }
+            }
+            _ => return None,
+        }
+        Some(signals)
+    }
+
     /// Features of `cause` for channel `c` inside the dynamics, or `None` when the cause acts
     /// at the output (the static features apply).
     pub(super) fn dynamic_features(
@@ -27,54 +155,18 @@ impl Prepared<'_> {
         let starts = &rec.segment_starts;
         let ch = &self.channels[c];
         let x = &ch.yhat;
-        let name = &rec.outputs[c].name;
-        let mut signals: Vec<(Vec<f64>, String)> = Vec::new();
-        match cause {
-            Cause::Hysteresis => {
-                // elastic-perfectly-plastic elements (stop operators) on the displacement:
-                // a Prandtl-Ishlinskii restoring force
-                let range = span(x);
-                for &w in &PLAY_WIDTHS {
-                    let r = w * range;
-                    let p = signal::play(x, starts, r);
-                    signals.push((
-                        x.iter().zip(&p).map(|(a, b)| a - b).collect(),
-                        format!("stop operator r={r:.4} on {name}"),
-                    ));
+        let (v, _) = self.model_velocity(c);
+        let specs = self.loop_signals(cause, c)?;
+        let mut signals: Vec<(Vec<f64>, &String)> = Vec::new();
+        for (sig, label) in &specs {
+            let mut out = vec![0.0; x.len()];
+            for (s, e) in signal::segments(starts, x.len()) {
+                let mut play = x[s];
+                for i in s..e {
+                    out[i] = sig.eval(x[i], v[i], &mut play);
                 }
             }
-            Cause::Friction => {
-                let (v, v0) = self.model_velocity(c);
-                let vs = 5.0 * v0;
-                let sgn: Vec<f64> = v.iter().map(|s| (s / v0).tanh()).collect();
-                signals.push((
-                    sgn.clone(),
-                    format!("Coulomb friction from d{name}/dt (model)"),
-                ));
-                signals.push((
-                    v.iter().map(|s| s / vs).collect(),
-                    format!("viscous friction at {vs:.4} /s of {name}"),
-                ));
-                signals.push((
-                    sgn.iter()
-                        .zip(&v)
-                        .map(|(g, s)| g * (-(s / vs).powi(2)).exp())
-                        .collect(),
-                    format!("Stribeck peak of d{name}/dt"),
-                ));
-            }
-            Cause::Nonlinearity => {
-                // stiffening of the restoring force: quadratic and cubic in the displacement
-                let (m, _) = signal::mean_std(x);
-                let r = 0.5 * span(x);
-                for p in [2, 3] {
-                    signals.push((
-                        x.iter().map(|v| ((v - m) / r).powi(p)).collect(),
-                        format!("restoring force ({name} - mean)^{p}"),
-                    ));
-                }
-            }
-            _ => return None,
+            signals.push((out, label));
         }
         let mut cols = Vec::new();
         let mut names = Vec::new();

@@ -134,6 +134,14 @@ impl Prepared<'_> {
                         nonneg.push(true);
                     }
                 }
+                if self.flexible.get() == Some(Cause::Hysteresis)
+                    && let Some(col) = self.preisach_column(c, &cols)
+                {
+                    // the most flexible variant: the Preisach class (see `preisach`)
+                    cols.push(col);
+                    names.push("Preisach plane (NNLS weights, scale)".into());
+                    nonneg.push(true);
+                }
             }
             Cause::RateDependence if self.pose.is_some() => {
                 // Viscosity in each column: Prony terms on the model's column strain.
@@ -319,5 +327,57 @@ impl Prepared<'_> {
             }
         }
         (cols, names, nonneg)
+    }
+}
+
+/// Threshold levels per drive of the Preisach plane (`levels (levels + 1) / 2` relays).
+const PREISACH_LEVELS: usize = 8;
+/// Most training rows the plane's NNLS fit uses (evenly thinned).
+const PREISACH_ROWS: usize = 20_000;
+
+impl Prepared<'_> {
+    /// The hysteresis of a discretised Preisach plane on each drive, as one column: relays on
+    /// an 8-level grid of thresholds across the drive's training range, their non-negative
+    /// weights fitted by NNLS jointly with the baseline's free regressors (either sign) and the
+    /// play-operator columns `pi` (non-negative) on the training rows. The joint fit then only
+    /// scales it, so its 36 weights per drive are not counted as parameters: it serves as the
+    /// reference a further cause must beat, never as a named extension of its own.
+    fn preisach_column(&self, c: usize, pi: &[Vec<f64>]) -> Option<Vec<f64>> {
+        let rec = self.rec;
+        let ch = &self.channels[c];
+        let mut relays: Vec<Vec<f64>> = Vec::new();
+        for &k in &rec.drives {
+            let u = &rec.inputs[k].values;
+            let lo = u
+                .iter()
+                .zip(&self.train)
+                .filter(|(_, t)| **t)
+                .map(|(v, _)| *v)
+                .fold(f64::INFINITY, f64::min);
+            let hi = lo + self.ranges[k];
+            for (_, _, r) in crate::preisach::plane(u, &rec.segment_starts, lo, hi, PREISACH_LEVELS)
+            {
+                relays.push(r.iter().map(|v| ch.sign[k] * v).collect());
+            }
+        }
+        let target: Vec<f64> =
+            ch.y.iter()
+                .zip(&ch.design.fixed)
+                .map(|(y, f)| y - f)
+                .collect();
+        let mut nonneg: Vec<&[f64]> = relays.iter().map(|v| v.as_slice()).collect();
+        nonneg.extend(pi.iter().map(|v| v.as_slice()));
+        let free: Vec<&[f64]> = ch.design.regressors.iter().map(|v| v.as_slice()).collect();
+        let (w, _) =
+            crate::preisach::nnls_fit(&nonneg, &free, &target, &self.train, PREISACH_ROWS)?;
+        let mut col = vec![0.0; rec.len()];
+        for (r, wj) in relays.iter().zip(&w) {
+            if *wj > 0.0 {
+                for (a, b) in col.iter_mut().zip(r) {
+                    *a += wj * b;
+                }
+            }
+        }
+        col.iter().any(|v| *v != 0.0).then_some(col)
     }
 }

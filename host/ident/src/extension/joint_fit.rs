@@ -1,8 +1,10 @@
 //! Joint fit of the baseline's free coefficients and a set of extensions on the training
 //! rows; latency searches its dead time and lag around the linear fit.
 
+use super::dynamic_features::LoopSignal;
 use super::features::Features;
 use super::prepared::{Prepared, channel_scale};
+use crate::baseline::Baseline;
 use crate::cause::Cause;
 use crate::lsq;
 use crate::signal;
@@ -213,6 +215,36 @@ impl Prepared<'_> {
         } else {
             fit_at(0.0, 0.0)
         };
+        let mut in_loop_extra = 0usize;
+        // Extensions inside the dynamics of a state-space baseline: refine them in the loop
+        // (see `in_loop`), keeping the linear fit where that does not lower the training error.
+        if let Baseline::StateSpace(ss) = &self.baseline
+            && !with_latency
+            && ss.order() > 0
+            && !causes.is_empty()
+        {
+            for (c, (fit, pred, nb)) in fits.iter_mut().enumerate() {
+                let groups: Option<Vec<Vec<LoopSignal>>> = causes
+                    .iter()
+                    .map(|&cause| {
+                        self.loop_signals(cause, c)
+                            .map(|v| v.into_iter().map(|(s, _)| s).collect())
+                    })
+                    .collect();
+                let Some(groups) = groups else { continue };
+                if let Some(il) = self.refine_in_loop(ss, c, causes, &groups, &fit.coef)
+                    && il.rss < fit.rss
+                {
+                    in_loop_extra += il.extra;
+                    fit.rss = il.rss;
+                    *pred = il.pred;
+                    for (j, (w, se)) in il.weights.into_iter().enumerate() {
+                        fit.coef[*nb + j] = w;
+                        fit.std_err[*nb + j] = se;
+                    }
+                }
+            }
+        }
         // Standard errors of the latency parameters from the curvature of the residual sum of
         // squares (profile likelihood, Gaussian residuals): se = sqrt(2 s^2 / RSS'').
         let latency_se = if with_latency {
@@ -273,7 +305,7 @@ impl Prepared<'_> {
             rss.push(fit.rss);
             pred.push(p);
         }
-        extra += used.saturating_sub(base_params);
+        extra += used.saturating_sub(base_params) + in_loop_extra;
         if with_latency {
             extra += 2;
             // NaN marks a parameter at its lower bound (no two-sided curvature).

@@ -5,6 +5,7 @@
 
 mod dynamic_features;
 mod features;
+mod in_loop;
 mod joint_fit;
 mod prepared;
 

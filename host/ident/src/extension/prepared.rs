@@ -59,6 +59,9 @@ pub struct Prepared<'a> {
     /// The cause whose most flexible variant is fitted (while a further cause is tested
     /// against it), if any.
     pub flexible: std::cell::Cell<Option<Cause>>,
+    /// In-loop refinements already done, per channel and set of causes (see `in_loop`): the
+    /// selection fits the same sets repeatedly, and a larger set starts from a smaller one.
+    pub(super) in_loop_cache: std::cell::RefCell<Vec<super::in_loop::Cached>>,
 }
 
 impl<'a> Prepared<'a> {
@@ -161,6 +164,7 @@ impl<'a> Prepared<'a> {
             means,
             latency_hint: std::cell::Cell::new(None),
             flexible: std::cell::Cell::new(None),
+            in_loop_cache: std::cell::RefCell::new(Vec::new()),
         }
     }
 

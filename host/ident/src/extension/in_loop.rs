@@ -1,0 +1,535 @@
+//! Extensions inside the dynamics, refined in the loop: the extension's force is computed from
+//! the extended model's own state at every step and fed back where the input force enters,
+//! and the baseline's dynamics `(A, B, C, D, d)`, the initial states, the extension's weights
+//! and the internal coordinate the force acts on are refined together by Levenberg-Marquardt
+//! on the free-run training error. The internal coordinate `z = c_z x + D u + d` starts at the
+//! output (`c_z = C`) and is free: in a two-mass oscillator measured at the second mass the
+//! friction and the stiffening act on the first, whose motion is another combination of the
+//! states (a friction driven by the measured mass's velocity explained 10-47 % of such records).
+//!
+//! The linear fit ([`super::dynamic_features`]) computes the signals from the baseline's output
+//! and filters them through the baseline's dynamics: a good start, but the baseline was fitted
+//! to data that contain the effect (a friction reads as extra damping, a stiffening as a
+//! stiffer spring), and a sticking mass does not move like the linear model says. Fitting
+//! everything jointly in the loop is what the free-run error of an extended model means.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::dynamic_features::LoopSignal;
+use super::prepared::Prepared;
+use crate::cause::Cause;
+use crate::lsq;
+use crate::signal;
+use crate::statespace::StateSpace;
+
+/// Most rows simulated while refining (a prefix of the record; the final prediction runs over
+/// every row): bounds the cost on long records.
+const WINDOW_ROWS: usize = 10_000;
+/// Most training rows scored while refining (evenly thinned).
+const SCORED_ROWS: usize = 3000;
+/// Levenberg-Marquardt iterations.
+const ITERATIONS: usize = 25;
+/// Relative decrease of the training cost below which the refinement stops: the criteria
+/// compare `N ln(RSS)`, so with N in the thousands a smaller decrease changes no decision.
+const TOLERANCE: f64 = 1e-5;
+
+/// The result of an in-loop refinement of one output channel.
+#[derive(Debug, Clone)]
+pub(super) struct InLoopFit {
+    /// Prediction on every row.
+    pub pred: Vec<f64>,
+    /// Training RSS on every training row.
+    pub rss: f64,
+    /// Extension weights (per drive, per signal) and their standard errors.
+    pub weights: Vec<(f64, f64)>,
+    /// Parameters beyond the linear fit's: the internal coordinate's `n` coefficients.
+    pub extra: usize,
+}
+
+/// A finished refinement, kept for the selection's repeated and growing sets.
+#[derive(Debug, Clone)]
+pub(crate) struct Cached {
+    channel: usize,
+    causes: Vec<Cause>,
+    flexible: Option<Cause>,
+    /// `A, B, C, D, d` as laid out in the parameter vector.
+    shared: Vec<f64>,
+    /// Initial-state offsets.
+    x0: Vec<f64>,
+    /// Weights per cause (per drive, per signal).
+    weights: Vec<Vec<f64>>,
+    fit: InLoopFit,
+}
+
+/// Parameter layout: `A` (n x n, column-major), `B` (n x m), `C` (n), `D` (m), `d`, weights
+/// (drives x signals), initial-state offsets (n per fitted segment).
+struct Layout {
+    n: usize,
+    m: usize,
+    w: usize,
+    segs: Vec<(usize, usize)>,
+    fitted: Vec<bool>,
+}
+
+/// Number of initial-state offsets in the layout.
+fn np_x0(l: &Layout) -> usize {
+    l.len() - l.x0()
+}
+
+impl Layout {
+    fn a(&self) -> usize {
+        0
+    }
+    fn b(&self) -> usize {
+        self.n * self.n
+    }
+    fn c(&self) -> usize {
+        self.b() + self.n * self.m
+    }
+    fn d(&self) -> usize {
+        self.c() + self.n
+    }
+    fn bias(&self) -> usize {
+        self.d() + self.m
+    }
+    fn weights(&self) -> usize {
+        self.bias() + 1
+    }
+    fn x0(&self) -> usize {
+        self.weights() + self.w
+    }
+    /// The internal coordinate the signals act on, `z = c_z x + D u + d` (starts at `C`).
+    fn cz(&self) -> usize {
+        self.x0() + self.n * self.fitted.iter().filter(|f| **f).count()
+    }
+    fn len(&self) -> usize {
+        self.cz() + self.n
+    }
+}
+
+/// Everything one simulation needs.
+struct Loop<'a> {
+    lay: Layout,
+    du: Vec<Vec<f64>>,
+    inputs: Vec<&'a [f64]>,
+    time_s: &'a [f64],
+    signals: Vec<LoopSignal>,
+    /// Per weight: the drive it acts as and the signal it scales (the linear features' order:
+    /// per cause, per drive, per signal).
+    map: Vec<(usize, usize)>,
+}
+
+impl Loop<'_> {
+    /// Free-run output of the extended model on rows `..rows`; `None` when it diverges.
+    fn simulate(&self, th: &[f64], rows: usize) -> Option<Vec<f64>> {
+        let l = &self.lay;
+        let (n, m, ns) = (l.n, l.m, self.signals.len());
+        debug_assert!(ns <= 24);
+        let a = DMatrix::from_column_slice(n, n, &th[l.a()..l.b()]);
+        let b = DMatrix::from_column_slice(n, m, &th[l.b()..l.c()]);
+        // row-major copies for the inner loop
+        let af: Vec<f64> = (0..n * n).map(|t| a[(t / n, t % n)]).collect();
+        let bf: Vec<f64> = (0..n * m).map(|t| b[(t / m, t % m)]).collect();
+        let cv = &th[l.c()..l.d()];
+        let dv = &th[l.d()..l.bias()];
+        let bias = th[l.bias()];
+        let w = &th[l.weights()..l.x0()];
+        let cz = &th[l.cz()..l.len()];
+        let lu = (DMatrix::<f64>::identity(n, n) - &a).lu();
+        let mut out = vec![0.0; rows];
+        let mut x = vec![0.0; n];
+        let mut xn = vec![0.0; n];
+        let mut force = vec![0.0; m];
+        let mut plays = vec![0.0; ns];
+        let mut x0_at = l.x0();
+        for (si, &(s, e)) in l.segs.iter().enumerate() {
+            if s >= rows {
+                break;
+            }
+            let e = e.min(rows);
+            let v0 = DVector::from_iterator(m, self.du.iter().map(|c| c[s]));
+            let rest = lu.solve(&(&b * v0)).unwrap_or_else(|| DVector::zeros(n));
+            for j in 0..n {
+                x[j] = if rest[j].is_finite() { rest[j] } else { 0.0 };
+            }
+            if l.fitted[si] {
+                for j in 0..n {
+                    x[j] += th[x0_at + j];
+                }
+                x0_at += n;
+            }
+            force.iter_mut().for_each(|f| *f = 0.0);
+            let y_of = |c: &[f64], x: &[f64], i: usize| -> f64 {
+                let mut y = bias;
+                for j in 0..n {
+                    y += c[j] * x[j];
+                }
+                for k in 0..m {
+                    y += dv[k] * self.inputs[k][i];
+                }
+                y
+            };
+            let mut z_prev = y_of(cz, &x, s);
+            let mut first = true;
+            for i in s..e {
+                let y = y_of(cv, &x, i);
+                let z = y_of(cz, &x, i);
+                // the next state with the force held: a one-step look-ahead gives a central
+                // velocity without a half-sample lag at reversals
+                for j in 0..n {
+                    let mut acc: f64 = af[j * n..(j + 1) * n]
+                        .iter()
+                        .zip(&x)
+                        .map(|(p, q)| p * q)
+                        .sum();
+                    for k in 0..m {
+                        acc += bf[j * m + k] * (self.du[k][i] + force[k]);
+                    }
+                    xn[j] = acc;
+                }
+                let (z_next, t_next) = if i + 1 < e {
+                    (y_of(cz, &xn, i + 1), self.time_s[i + 1])
+                } else {
+                    (z, self.time_s[i])
+                };
+                let t_prev = if first {
+                    self.time_s[i]
+                } else {
+                    self.time_s[i - 1]
+                };
+                let span = t_next - t_prev;
+                let v = if span > 0.0 {
+                    (z_next - z_prev) / span
+                } else {
+                    0.0
+                };
+                if first {
+                    plays.iter_mut().for_each(|p| *p = z);
+                    first = false;
+                }
+                let mut phi = [0.0; 24];
+                for (q, sig) in self.signals.iter().enumerate() {
+                    phi[q] = sig.eval(z, v, &mut plays[q]);
+                }
+                force.iter_mut().for_each(|f| *f = 0.0);
+                for (wj, &(k, q)) in w.iter().zip(&self.map) {
+                    force[k] += wj * phi[q];
+                }
+                let mut out_i = y;
+                for k in 0..m {
+                    out_i += dv[k] * force[k];
+                }
+                out[i] = out_i;
+                z_prev = z;
+                for j in 0..n {
+                    let mut acc: f64 = af[j * n..(j + 1) * n]
+                        .iter()
+                        .zip(&x)
+                        .map(|(p, q)| p * q)
+                        .sum();
+                    for k in 0..m {
+                        acc += bf[j * m + k] * (self.du[k][i] + force[k]);
+                    }
+                    xn[j] = acc;
+                }
+                std::mem::swap(&mut x, &mut xn);
+                if !out_i.is_finite() || x.iter().any(|v| !v.is_finite() || v.abs() > 1e150) {
+                    return None;
+                }
+            }
+        }
+        Some(out)
+    }
+}
+
+impl Prepared<'_> {
+    /// Refines channel `c`'s extended model in the loop, starting from the linear joint fit's
+    /// coefficients `coef` (the baseline design's regressors, then per cause, per drive, one
+    /// weight per signal of `groups`). `None` when the record is unsuitable or the refinement
+    /// diverges.
+    pub(super) fn refine_in_loop(
+        &self,
+        ss: &StateSpace,
+        c: usize,
+        causes: &[Cause],
+        groups: &[Vec<LoopSignal>],
+        coef: &[f64],
+    ) -> Option<InLoopFit> {
+        let flexible = self.flexible.get();
+        if let Some(hit) = self
+            .in_loop_cache
+            .borrow()
+            .iter()
+            .find(|e| e.channel == c && e.causes == causes && e.flexible == flexible)
+        {
+            return Some(hit.fit.clone());
+        }
+        let rec = self.rec;
+        let rows = rec.len();
+        let (n, m) = (ss.order(), rec.inputs.len());
+        let signals: Vec<LoopSignal> = groups.iter().flatten().copied().collect();
+        let ns = signals.len();
+        if n == 0 || ns == 0 || ns > 24 {
+            return None;
+        }
+        let drives = &rec.drives;
+        let mut map = Vec::new();
+        let mut off = 0;
+        for g in groups {
+            for &k in drives {
+                for q in 0..g.len() {
+                    map.push((k, off + q));
+                }
+            }
+            off += g.len();
+        }
+        let nw = map.len();
+        let design = &self.channels[c].design;
+        let nb = design.regressors.len();
+        if coef.len() != nb + nw {
+            return None;
+        }
+        let segs = signal::segments(&rec.segment_starts, rows);
+        let window = rows.min(WINDOW_ROWS);
+        let fitted: Vec<bool> = segs
+            .iter()
+            .map(|&(s, e)| s < window && (s..e.min(window)).any(|i| self.train[i]))
+            .collect();
+        let lay = Layout {
+            n,
+            m,
+            w: nw,
+            segs: segs.clone(),
+            fitted,
+        };
+        let inputs: Vec<&[f64]> = rec.inputs.iter().map(|ch| ch.values.as_slice()).collect();
+        let du: Vec<Vec<f64>> = inputs
+            .iter()
+            .zip(&ss.u_mean)
+            .map(|(u, mu)| u.iter().map(|v| v - mu).collect())
+            .collect();
+        let lp = Loop {
+            lay,
+            du,
+            inputs,
+            time_s: &rec.time_s,
+            signals,
+            map,
+        };
+        let lay = &lp.lay;
+        // start: the baseline's dynamics, the joint fit's output map and weights, and the
+        // initial states that reproduce the joint fit's initial-state responses
+        let mut th = vec![0.0; lay.len()];
+        th[lay.a()..lay.b()].copy_from_slice(ss.a.as_slice());
+        th[lay.b()..lay.c()].copy_from_slice(ss.b.as_slice());
+        th[lay.c()..lay.d()].copy_from_slice(&coef[..n]);
+        th[lay.d()..lay.bias()].copy_from_slice(&coef[n..n + m]);
+        th[lay.bias()] = coef[n + m];
+        th[lay.weights()..lay.x0()].copy_from_slice(&coef[nb..]);
+        th[lay.cz()..].copy_from_slice(&coef[..n]);
+        if nb > n + m + 1 {
+            let mut free = vec![0.0; rows];
+            for (j, col) in design.regressors[n + m + 1..].iter().enumerate() {
+                for i in 0..rows {
+                    free[i] += coef[n + m + 1 + j] * col[i];
+                }
+            }
+            // columns C A^k e_j of each fitted segment
+            let cm = DMatrix::from_row_slice(1, n, &coef[..n]);
+            let mut cols = Vec::new();
+            for (si, &(s, e)) in segs.iter().enumerate() {
+                if !lay.fitted[si] {
+                    continue;
+                }
+                for j in 0..n {
+                    let mut col = vec![0.0; rows];
+                    let mut x = DVector::<f64>::zeros(n);
+                    x[j] = 1.0;
+                    for v in col.iter_mut().take(e).skip(s) {
+                        *v = (&cm * &x)[0];
+                        x = &ss.a * x;
+                    }
+                    cols.push(col);
+                }
+            }
+            let refs: Vec<&[f64]> = cols.iter().map(|v| v.as_slice()).collect();
+            let fit = lsq::fit(&refs, &free, &self.train, &[]);
+            th[lay.x0()..lay.cz()].copy_from_slice(&fit.coef);
+        }
+        // scored rows: training rows of the window, evenly thinned
+        let train_rows: Vec<usize> = (0..window).filter(|&i| self.train[i]).collect();
+        let stride = train_rows.len().div_ceil(SCORED_ROWS).max(1);
+        let scored: Vec<usize> = train_rows.iter().copied().step_by(stride).collect();
+        let y = &self.channels[c].y;
+        let residuals = |th: &[f64]| -> Option<Vec<f64>> {
+            let p = lp.simulate(th, window)?;
+            Some(scored.iter().map(|&i| y[i] - p[i]).collect())
+        };
+        let cost_of = |r: &[f64]| -> f64 { r.iter().map(|e| e * e).sum() };
+        let nd = drives.len();
+        // weight offsets of each cause in the parameter vector
+        let mut w_at = Vec::new();
+        let mut at = lay.weights();
+        for g in groups {
+            w_at.push(at);
+            at += g.len() * nd;
+        }
+        // A warm start from the largest refined subset of these causes (their weights kept,
+        // the new causes' at zero): the set then starts where the smaller one ended, so what
+        // it gains is the added extension's and not a better-converged baseline's.
+        let warm: Option<Vec<f64>> = {
+            let cache = self.in_loop_cache.borrow();
+            cache
+                .iter()
+                .filter(|e| {
+                    e.channel == c
+                        && e.causes.len() < causes.len()
+                        && e.shared.len() == lay.weights()
+                        && e.x0.len() == np_x0(lay)
+                        && e.causes.iter().zip(&e.weights).all(|(ec, ew)| {
+                            causes.iter().position(|k| k == ec).is_some_and(|i| {
+                                ew.len() == groups[i].len() * nd
+                                    && (e.flexible != Some(*ec) || flexible == Some(*ec))
+                            })
+                        })
+                })
+                .max_by_key(|e| e.causes.len())
+                .map(|e| {
+                    let mut t = vec![0.0; lay.len()];
+                    t[..lay.weights()].copy_from_slice(&e.shared);
+                    t[lay.x0()..].copy_from_slice(&e.x0);
+                    for (ec, ew) in e.causes.iter().zip(&e.weights) {
+                        let i = causes.iter().position(|k| k == ec).unwrap_or(0);
+                        t[w_at[i]..w_at[i] + ew.len()].copy_from_slice(ew);
+                    }
+                    t
+                })
+        };
+        // starts: the linear fit, the warm start, and the baseline alone (weights zero, which
+        // cannot diverge where the baseline does not); the best finite one wins
+        // (the linear fit's weights fed back can overshoot: a stiffening fitted open-loop is
+        // too strong in the loop, so they are also tried at a half and a quarter)
+        let scaled = |f: f64| {
+            let mut t = th.clone();
+            t[lay.weights()..lay.x0()].iter_mut().for_each(|v| *v *= f);
+            t
+        };
+        let starts = [scaled(1.0), scaled(0.5), scaled(0.25), scaled(0.0)];
+        let mut best: Option<(f64, Vec<f64>, Vec<f64>)> = None;
+        for t in starts.into_iter().chain(warm) {
+            if let Some(rt) = residuals(&t) {
+                let ct = cost_of(&rt);
+                if best.as_ref().is_none_or(|b| ct < b.0) {
+                    best = Some((ct, t, rt));
+                }
+            }
+        }
+        let (mut cost, mut th, mut r) = best?;
+        let np = th.len();
+        // finite-difference steps relative to each parameter group's size
+        let param_groups = [
+            (lay.a(), lay.b()),
+            (lay.b(), lay.c()),
+            (lay.c(), lay.d()),
+            (lay.d(), lay.bias()),
+            (lay.bias(), lay.weights()),
+            (lay.weights(), lay.x0()),
+            (lay.x0(), lay.cz()),
+            (lay.cz(), np),
+        ];
+        let mut lambda = 1e-3;
+        let mut jac: Vec<Vec<f64>> = Vec::new();
+        for _ in 0..ITERATIONS {
+            let mut scale = vec![0.0; np];
+            for &(g0, g1) in &param_groups {
+                if g1 > g0 {
+                    let rms =
+                        (th[g0..g1].iter().map(|v| v * v).sum::<f64>() / (g1 - g0) as f64).sqrt();
+                    scale[g0..g1].iter_mut().for_each(|s| *s = rms);
+                }
+            }
+            jac.clear();
+            for j in 0..np {
+                let h = 1e-6 * (th[j].abs() + scale[j]).max(1e-12);
+                let mut t = th.clone();
+                t[j] += h;
+                match residuals(&t) {
+                    Some(rj) => jac.push(rj.iter().zip(&r).map(|(p, q)| (q - p) / h).collect()),
+                    None => jac.push(vec![0.0; r.len()]),
+                }
+            }
+            let mut jtj = DMatrix::<f64>::zeros(np, np);
+            let mut jtr = DVector::<f64>::zeros(np);
+            for p in 0..np {
+                jtr[p] = jac[p].iter().zip(&r).map(|(a, b)| a * b).sum();
+                for q in p..np {
+                    let s: f64 = jac[p].iter().zip(&jac[q]).map(|(a, b)| a * b).sum();
+                    jtj[(p, q)] = s;
+                    jtj[(q, p)] = s;
+                }
+            }
+            let mut improved = false;
+            for _ in 0..8 {
+                let mut lhs = jtj.clone();
+                for d in 0..np {
+                    lhs[(d, d)] += lambda * jtj[(d, d)].max(1e-300) + 1e-300;
+                }
+                let Some(step) = lhs.cholesky().map(|ch| ch.solve(&jtr)) else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let t: Vec<f64> = th.iter().zip(step.iter()).map(|(p, s)| p + s).collect();
+                if let Some(rt) = residuals(&t) {
+                    let ct: f64 = rt.iter().map(|e| e * e).sum();
+                    if ct < cost {
+                        let rel = (cost - ct) / cost.max(1e-300);
+                        th = t;
+                        r = rt;
+                        cost = ct;
+                        lambda = (lambda / 3.0).max(1e-9);
+                        improved = rel > TOLERANCE;
+                        break;
+                    }
+                }
+                lambda *= 10.0;
+            }
+            if !improved {
+                break;
+            }
+        }
+        let pred = lp.simulate(&th, rows)?;
+        let rss: f64 = (0..rows)
+            .filter(|&i| self.train[i])
+            .map(|i| (y[i] - pred[i]).powi(2))
+            .sum();
+        // standard errors from the last Jacobian (white residuals: optimistic when they are
+        // autocorrelated); the gauge freedom of (A, B, C) does not touch the weights
+        let refs: Vec<&[f64]> = jac.iter().map(|v| v.as_slice()).collect();
+        let se = if refs.len() == np {
+            lsq::fit(&refs, &r, &vec![true; r.len()], &[]).std_err
+        } else {
+            vec![f64::NAN; np]
+        };
+        let weights = (lay.weights()..lay.x0()).map(|j| (th[j], se[j])).collect();
+        let fit = InLoopFit {
+            pred,
+            rss,
+            weights,
+            extra: n,
+        };
+        self.in_loop_cache.borrow_mut().push(Cached {
+            channel: c,
+            causes: causes.to_vec(),
+            flexible,
+            shared: th[..lay.weights()].to_vec(),
+            x0: th[lay.x0()..].to_vec(),
+            weights: groups
+                .iter()
+                .enumerate()
+                .map(|(i, g)| th[w_at[i]..w_at[i] + g.len() * nd].to_vec())
+                .collect(),
+            fit: fit.clone(),
+        });
+        Some(fit)
+    }
+}
