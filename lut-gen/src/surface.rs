@@ -280,6 +280,7 @@ impl<const NX: usize, const NY: usize, const K: usize> EnergySurface<NX, NY, K> 
         self.eval3_with::<false>(strains, w)
     }
 
+    #[inline(always)]
     fn eval3_with<const VALUES: bool>(&self, strains: [f64; 3], w: f64) -> [[PartGrad; K]; 3] {
         let (x0, x1) = self.strain;
         let sx = 2.0 / (x1 - x0);
@@ -319,10 +320,11 @@ impl<const NX: usize, const NY: usize, const K: usize> EnergySurface<NX, NY, K> 
         }
     }
 
-    /// Per part and strain order: `sum_m c[k][j][m] T_m(y)` and its
+    /// Per strain order and part: `sum_m c[k][j][m] T_m(y)` and its
     /// derivative with respect to the mapped bend coordinate.
-    fn contract_bend(&self, y: f64) -> [[[f64; 2]; NX]; K] {
-        let ty = 2.0 * y / self.y_max - 1.0;
+    #[inline(always)]
+    fn contract_bend(&self, y: f64) -> [[[f64; 2]; K]; NX] {
+        let ty = (2.0 * y - self.y_max) / self.y_max;
         let (mut v, mut dv) = ([0.0; NY], [0.0; NY]);
         v[0] = 1.0;
         v[1] = ty;
@@ -340,10 +342,10 @@ impl<const NX: usize, const NY: usize, const K: usize> EnergySurface<NX, NY, K> 
             }
             p + q
         };
-        let mut rows = [[[0.0; 2]; NX]; K];
-        for (r, part) in rows.iter_mut().zip(self.coef.iter()) {
-            for (rj, c) in r.iter_mut().zip(part) {
-                *rj = [dot(c, &v), dot(c, &dv)];
+        let mut rows = [[[0.0; 2]; K]; NX];
+        for (j, r) in rows.iter_mut().enumerate() {
+            for (rk, part) in r.iter_mut().zip(self.coef.iter()) {
+                *rk = [dot(&part[j], &v), dot(&part[j], &dv)];
             }
         }
         rows
@@ -353,27 +355,30 @@ impl<const NX: usize, const NY: usize, const K: usize> EnergySurface<NX, NY, K> 
 /// Value, strain derivative and bend derivative (all in mapped coordinates)
 /// of each part from the contracted rows, `T_j(x)` and `T_j'(x)` by their
 /// recurrences.
+#[inline(always)]
 fn sum_strain<const NX: usize, const K: usize, const VALUES: bool>(
-    rows: &[[[f64; 2]; NX]; K],
+    rows: &[[[f64; 2]; K]; NX],
     tx: f64,
 ) -> [[f64; 3]; K] {
+    // Independent sums per part and quantity, so the recurrence is the only
+    // dependency chain.
     let mut acc = [[0.0; 3]; K];
-    let mut add = |t: f64, d: f64, j: usize| {
-        for (a, r) in acc.iter_mut().zip(rows) {
+    let add = |acc: &mut [[f64; 3]; K], t: f64, d: f64, r: &[[f64; 2]; K]| {
+        for (a, rk) in acc.iter_mut().zip(r) {
             if VALUES {
-                a[0] += t * r[j][0];
+                a[0] += t * rk[0];
             }
-            a[1] += d * r[j][0];
-            a[2] += t * r[j][1];
+            a[1] += d * rk[0];
+            a[2] += t * rk[1];
         }
     };
     let (mut t0, mut t1, mut d0, mut d1) = (1.0, tx, 0.0, 1.0);
-    add(t0, d0, 0);
-    add(t1, d1, 1);
-    for j in 2..NX {
+    add(&mut acc, t0, d0, &rows[0]);
+    add(&mut acc, t1, d1, &rows[1]);
+    for r in &rows[2..] {
         let t2 = 2.0 * tx * t1 - t0;
         let d2 = 2.0 * t1 + 2.0 * tx * d1 - d0;
-        add(t2, d2, j);
+        add(&mut acc, t2, d2, r);
         (t0, t1, d0, d1) = (t1, t2, d1, d2);
     }
     acc

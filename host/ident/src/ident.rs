@@ -156,7 +156,7 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         0.0
     };
     // The linear-dynamic reference beside a static series baseline.
-    let dynamic_baseline_rmse = if matches!(baseline, Baseline::Series) {
+    let dynamic_baseline_rmse = if cfg.dynamic_reference && matches!(baseline, Baseline::Series) {
         let dp = Prepared::new(rec, Baseline::state_space(rec, &train), test.clone());
         let f = dp.fit_set(&[]);
         Some(select::heldout_rmse(&dp, &f.pred))

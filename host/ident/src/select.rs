@@ -46,6 +46,9 @@ pub struct Config {
     pub hac_lags: usize,
     /// Baseline of `series` records without `sim_` columns.
     pub series_model: SeriesModel,
+    /// Also fit the linear state-space model beside a static `series` baseline and report its
+    /// held-out error (a reference for the reader; it does not enter the verdict).
+    pub dynamic_reference: bool,
 }
 
 impl Default for Config {
@@ -58,6 +61,7 @@ impl Default for Config {
             min_extra_gain_pct: 15.0,
             hac_lags: 20,
             series_model: SeriesModel::Static,
+            dynamic_reference: true,
         }
     }
 }
