@@ -258,29 +258,13 @@ pub fn collect(
 impl FemSamples {
     /// Writes the samples as JSON.
     pub fn write(&self, path: &std::path::Path) -> Result<()> {
-        let text = serde_json::to_string(self)
-            .map_err(|e| SurrogateError::Solver(format!("serialising samples: {e}")))?;
-        std::fs::write(path, text).map_err(|source| SurrogateError::Io {
-            path: path.display().to_string(),
-            source,
-        })
+        crate::json::write(path, self, "samples")
     }
 
     /// Reads and checks a samples file.
     pub fn read(path: &std::path::Path) -> Result<Self> {
-        let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| SurrogateError::Io {
-            path: name.clone(),
-            source,
-        })?;
-        let s: FemSamples = serde_json::from_str(&text).map_err(|e| {
-            SurrogateError::parse(
-                &name,
-                format!("line {} column {}", e.line(), e.column()),
-                e.to_string(),
-            )
-        })?;
-        s.check(&name)?;
+        let s: FemSamples = crate::json::read(path)?;
+        s.check(&path.display().to_string())?;
         Ok(s)
     }
 

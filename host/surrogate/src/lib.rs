@@ -20,6 +20,7 @@ pub mod constraints;
 pub mod fem_samples;
 pub mod force;
 pub mod geometry;
+mod json;
 pub mod mapping;
 pub mod model;
 pub mod plane;

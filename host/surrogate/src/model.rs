@@ -186,28 +186,13 @@ impl SurrogateModel {
 
     /// Writes the model as JSON.
     pub fn write(&self, path: &std::path::Path) -> Result<()> {
-        let text = serde_json::to_string_pretty(self)
-            .map_err(|e| SurrogateError::Solver(format!("serialising model: {e}")))?;
-        std::fs::write(path, text).map_err(|source| SurrogateError::Io {
-            path: path.display().to_string(),
-            source,
-        })
+        crate::json::write(path, self, "model")
     }
 
     /// Reads a model file and checks its format tag and limits.
     pub fn read(path: &std::path::Path) -> Result<Self> {
         let name = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|source| SurrogateError::Io {
-            path: name.clone(),
-            source,
-        })?;
-        let m: SurrogateModel = serde_json::from_str(&text).map_err(|e| {
-            SurrogateError::parse(
-                &name,
-                format!("line {} column {}", e.line(), e.column()),
-                e.to_string(),
-            )
-        })?;
+        let m: SurrogateModel = crate::json::read(path)?;
         if m.format != FORMAT {
             return Err(SurrogateError::parse(
                 &name,
