@@ -1,24 +1,12 @@
 //! Grouped constraints (eq 4.23-4.24): no commanded, projected or optimised posture violates them.
 
 use nalgebra::Vector3;
-use ocm_surrogate::chain::{ChainGeometry, GROUPS, N_JOINTS, Posture};
+mod common;
+use common::chain;
+use ocm_surrogate::chain::{GROUPS, N_JOINTS, Posture};
 use ocm_surrogate::constraints::Limits;
 use ocm_surrogate::mapping::{MatchConfig, match_tcp};
 use proptest::prelude::*;
-
-fn chain() -> ChainGeometry {
-    ChainGeometry {
-        base_height_m: 0.0216,
-        segment_length_m: 0.0265,
-        tcp_offset_m: 0.0395,
-        link_radius_m: 0.074,
-        base_radius_m: 0.067,
-        top_radius_m: 0.083,
-        top_thickness_m: 0.0195,
-        link_mass_kg: 0.82 / 7.0,
-        dummy_mass_kg: 1e-5,
-    }
-}
 
 fn posture() -> impl Strategy<Value = Posture> {
     proptest::array::uniform11(-0.5f64..0.5)

@@ -2,24 +2,12 @@
 //! forward kinematics, commands always satisfy the grouped constraints, gravity and contact
 //! produce a TCP force.
 
-use ocm_surrogate::chain::{ChainGeometry, N_JOINTS, Posture};
+mod common;
+use common::chain;
+use ocm_surrogate::chain::{N_JOINTS, Posture};
 use ocm_surrogate::constraints::Limits;
 use ocm_surrogate::sim::{SceneConfig, Sim, Surface};
 use rand::{Rng, SeedableRng};
-
-fn chain() -> ChainGeometry {
-    ChainGeometry {
-        base_height_m: 0.0216,
-        segment_length_m: 0.0265,
-        tcp_offset_m: 0.0395,
-        link_radius_m: 0.074,
-        base_radius_m: 0.067,
-        top_radius_m: 0.083,
-        top_thickness_m: 0.0195,
-        link_mass_kg: 0.82 / 7.0,
-        dummy_mass_kg: 1e-5,
-    }
-}
 
 #[test]
 fn rapier_posture_and_tcp_agree_with_our_kinematics() {
