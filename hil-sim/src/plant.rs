@@ -37,7 +37,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::SimError;
 use crate::effects::{BoucWen, COLUMN_LOOP, Effects};
-use crate::pcc::{COS_BETA, Config, SIN_BETA};
+use crate::pcc::{COS_BETA, Config, SIN_BETA, sinc_from_sin};
 use crate::pneumatics::{Regulator, RegulatorParams};
 use crate::potential::OcmPotential;
 
@@ -240,15 +240,6 @@ fn dsinc_over_x(x: f64, sin: f64, cos: f64) -> f64 {
     }
 }
 
-/// `sin x / x` from `sin x`, with the series of [`crate::pcc::sinc`] near zero.
-fn sinc_of(x: f64, sin: f64) -> f64 {
-    if x.abs() < 1e-4 {
-        1.0 - x * x / 6.0
-    } else {
-        sin / x
-    }
-}
-
 /// Closed-form Jacobian of [`Config::position`]: with `f = sinc^2(th/2)/2`,
 /// `p_xy = S f b` and `p_z = S sinc(th)`.
 pub fn position_jacobian(q: &Config) -> [[f64; 3]; 3] {
@@ -258,7 +249,7 @@ pub fn position_jacobian(q: &Config) -> [[f64; 3]; 3] {
     // One sine and cosine of the half angle give those of the whole.
     let (s_half, c_half) = half.sin_cos();
     let (s_th, c_th) = (2.0 * s_half * c_half, 1.0 - 2.0 * s_half * s_half);
-    let sh = sinc_of(half, s_half);
+    let sh = sinc_from_sin(half, s_half);
     let f = 0.5 * sh * sh;
     // f'(th)/th and sinc'(th)/th, both regular at th = 0.
     let df_over = 0.25 * sh * dsinc_over_x(half, s_half, c_half);
@@ -271,7 +262,7 @@ pub fn position_jacobian(q: &Config) -> [[f64; 3]; 3] {
             j[r][c + 1] = s * (f * delta + df_over * b[r] * b[c]);
         }
     }
-    j[2][0] = sinc_of(th, s_th);
+    j[2][0] = sinc_from_sin(th, s_th);
     j[2][1] = s * dz_over * b[0];
     j[2][2] = s * dz_over * b[1];
     j

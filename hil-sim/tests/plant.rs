@@ -284,21 +284,16 @@ fn gradient_only_evaluation_matches_the_full_one() {
         ([1.1, -0.5, 0.0], 0.2),
     ] {
         let (full, grad) = (pot.eval3(strains, w), pot.grad3(strains, w));
+        // The gradient path sums derivative expansions without the noise
+        // orders: equal to rounding (parts in 1e9 of the part's scale: 1e-3 J
+        // for the elastic energy, 1e-5 m^3 for the volume).
+        let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-8 * scale.max(b.abs());
         for (f, g) in full.iter().zip(&grad) {
-            assert_eq!(
-                (
-                    f.elastic.d_strain,
-                    f.elastic.d_w,
-                    f.volume.d_strain,
-                    f.volume.d_w
-                ),
-                (
-                    g.elastic.d_strain,
-                    g.elastic.d_w,
-                    g.volume.d_strain,
-                    g.volume.d_w
-                )
-            );
+            assert!(close(g.elastic.d_strain, f.elastic.d_strain, 1e-3));
+            assert!(close(g.elastic.d_w, f.elastic.d_w, 1e-3));
+            assert!(close(g.volume.d_strain, f.volume.d_strain, 1e-5));
+            assert!(close(g.volume.d_w, f.volume.d_w, 1e-5));
+            assert_eq!((g.elastic.value, g.volume.value), (0.0, 0.0));
         }
         // And the three-column evaluation is the one-column one.
         for (i, &e) in strains.iter().enumerate() {

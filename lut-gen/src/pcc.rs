@@ -74,40 +74,44 @@ impl Config {
         }
     }
 
+    /// `(theta, sinc(theta / 2), cos(theta / 2))`: every map below is a
+    /// function of these, so each costs one `hypot` and one `sin_cos`.
+    fn half_turn(&self) -> (f64, f64, f64) {
+        let th = self.bend_rad();
+        let half = 0.5 * th;
+        let (s, c) = half.sin_cos();
+        (th, sinc_from_sin(half, s), c)
+    }
+
     /// Plate-centre position in the base frame, metres.
     pub fn position(&self) -> [f64; 3] {
-        let th = self.bend_rad();
-        // (1 - cos th) / th^2 = sinc^2(th/2) / 2 and sin th / th = sinc th:
-        // both smooth through the straight pose.
-        let lateral = 0.5 * self.backbone_m * sinc(0.5 * th).powi(2);
+        let (_, sh, ch) = self.half_turn();
+        // (1 - cos th) / th^2 = sinc^2(th/2) / 2 and sin th / th =
+        // sinc(th/2) cos(th/2): both smooth through the straight pose.
+        let lateral = 0.5 * self.backbone_m * sh * sh;
         [
             lateral * self.bend_x_rad,
             lateral * self.bend_y_rad,
-            self.backbone_m * sinc(th),
+            self.backbone_m * sh * ch,
         ]
     }
 
     /// Plate orientation as a unit quaternion `[w, x, y, z]`: a turn by
     /// `theta` about the in-plane axis `(-sin phi, cos phi, 0)`.
     pub fn quaternion(&self) -> [f64; 4] {
-        let th = self.bend_rad();
-        let k = 0.5 * sinc(0.5 * th);
-        [
-            (0.5 * th).cos(),
-            -k * self.bend_y_rad,
-            k * self.bend_x_rad,
-            0.0,
-        ]
+        let (_, sh, ch) = self.half_turn();
+        let k = 0.5 * sh;
+        [ch, -k * self.bend_y_rad, k * self.bend_x_rad, 0.0]
     }
 
     /// Plate orientation as a rotation matrix (rows), the same turn as
     /// [`Self::quaternion`]: `R = I + sin(theta) [k]x + (1 - cos(theta)) [k]x^2`
     /// with `k = (-sin phi, cos phi, 0)`.
     pub fn rotation(&self) -> [[f64; 3]; 3] {
-        let th = self.bend_rad();
+        let (th, sh, ch) = self.half_turn();
         // sin(th)/th and (cos(th) - 1)/th^2, smooth through the straight pose.
-        let s1 = sinc(th);
-        let c1 = -0.5 * sinc(0.5 * th).powi(2);
+        let s1 = sh * ch;
+        let c1 = -0.5 * sh * sh;
         let (bx, by) = (self.bend_x_rad, self.bend_y_rad);
         [
             [1.0 + bx * bx * c1, bx * by * c1, bx * s1],
@@ -133,10 +137,16 @@ impl Config {
 
 /// `sin(x)/x`, exact through zero.
 pub fn sinc(x: f64) -> f64 {
+    sinc_from_sin(x, x.sin())
+}
+
+/// `sin(x)/x` given `sin(x)`, with the series near zero (where the quotient
+/// loses digits); callers that already hold the sine save a second one.
+pub fn sinc_from_sin(x: f64, sin_x: f64) -> f64 {
     if x.abs() < 1e-4 {
         1.0 - x * x / 6.0
     } else {
-        x.sin() / x
+        sin_x / x
     }
 }
 
