@@ -58,8 +58,10 @@ pub type PartsFn<const K: usize> = fn(&OcmModel, f64, f64) -> [f64; K];
 /// Elastic energy (bars and hinges, joules) and volume (cubic metres; the
 /// pressure's energy is `-P V`): what a simulation of the module needs.
 pub fn elastic_and_volume(model: &OcmModel, strain: f64, bend_rad: f64) -> [f64; 2] {
-    let e0 = model.energy_j(strain, bend_rad, 0.0);
-    [e0, e0 - model.energy_j(strain, bend_rad, 1.0)]
+    // One layer evaluation for both, and the volume without the cancellation
+    // of a difference of energies.
+    let [bar, hinge, volume] = bar_hinge_volume(model, strain, bend_rad);
+    [bar + hinge, volume]
 }
 
 /// Bar energy, hinge energy (joules) and volume (cubic metres) apart: what a
@@ -172,8 +174,7 @@ impl<const NX: usize, const NY: usize, const K: usize> GradTables<NX, NY, K> {
             u[m] = 2.0 * ty * u[m - 1] - u[m - 2];
         }
         let mut out = [[[0.0; NX]; 2]; K];
-        for k in 0..K {
-            let [ox, oy] = &mut out[k];
+        for (k, [ox, oy]) in out.iter_mut().enumerate() {
             for (row, tm) in self.dx[k][..self.rows_x[k]].iter().zip(&t) {
                 for (o, c) in ox.iter_mut().zip(row) {
                     *o += c * tm;

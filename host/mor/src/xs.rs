@@ -17,7 +17,7 @@
 //! (u = V q, u' = V q') go through [`XsProbe::compact_state`] alike; the reduced one only forms the
 //! probe nodes' rows of V.
 
-use nalgebra::{Matrix3, Rotation3, Vector3};
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use ocm_fem::bellows::{Bellows, backbone_arc};
 
 /// Number of configuration components of X_S.
@@ -97,7 +97,7 @@ impl XsProbe {
         let tcp = top + r * Vector3::z() * self.tcp_offset_m;
         let d = top - self.base_center;
         let (arc, kappa) = backbone_arc(&d);
-        let rv = Rotation3::from_matrix_unchecked(r).scaled_axis();
+        let rv = rotation_vector(&r);
         [tcp.x, tcp.y, tcp.z, arc, kappa, rv.x, rv.y, rv.z]
     }
 
@@ -128,8 +128,34 @@ impl XsProbe {
     }
 }
 
+/// Rotation vector (axis times angle, radians) of a rotation matrix.
+///
+/// Through the quaternion: `Rotation3::scaled_axis` takes the angle as
+/// `acos((trace - 1) / 2)`, which is NaN when rounding lifts the trace of a
+/// rotation near the identity above 3 (the plate at rest).
+fn rotation_vector(r: &Matrix3<f64>) -> Vector3<f64> {
+    UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*r)).scaled_axis()
+}
+
 #[cfg(test)]
 mod tests {
+    /// A rotation near the identity whose trace rounds above 3 still has its
+    /// rotation vector (the NaN rows of `ocm mor dataset` came from this).
+    #[test]
+    fn rotation_vector_near_identity_is_finite() {
+        let (s, c) = (1e-9f64, 1.0 + 1e-15);
+        let r = nalgebra::Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
+        assert!(r.trace() > 3.0);
+        let rv = super::rotation_vector(&r);
+        assert!(
+            (rv - nalgebra::Vector3::new(0.0, 0.0, 1e-9)).norm() < 1e-15,
+            "{rv}"
+        );
+        // and a finite turn is its axis times its angle
+        let q = nalgebra::Rotation3::from_scaled_axis(nalgebra::Vector3::new(0.3, -0.2, 0.1));
+        let rv = super::rotation_vector(q.matrix());
+        assert!((rv - nalgebra::Vector3::new(0.3, -0.2, 0.1)).norm() < 1e-14);
+    }
     use super::*;
 
     /// A column of nodes: base ring at z = 0, top face ring at z = 0.1, frame above it.
