@@ -49,3 +49,16 @@ if [ ! -x .venv/bin/python3 ] || ! cmp -s scripts/requirements-test.txt .venv/re
     .venv/bin/python3 -m pip install -q --disable-pip-version-check -r scripts/requirements-test.txt
     cp scripts/requirements-test.txt .venv/requirements-installed.txt
 fi
+
+# The Python binding of ocm-rl (Gymnasium environments, host/rl/py), built by maturin in the dev
+# profile into .venv. It shares target/ with the workspace, so when nothing changed this is a
+# no-op build and a reinstall of the same wheel; its output only shows when it fails.
+rl_log=$(mktemp)
+if ! VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" \
+    .venv/bin/maturin develop --quiet -m host/rl/py/Cargo.toml >"$rl_log" 2>&1; then
+    cat "$rl_log" >&2
+    rm -f "$rl_log"
+    echo "setup: building the Python binding of ocm-rl (host/rl/py) failed" >&2
+    exit 1
+fi
+rm -f "$rl_log"

@@ -1,7 +1,7 @@
 //! `ocm fem`: finite-element runs, bellows pressure sweeps and material calibration.
 
+use crate::progress::bar;
 use anyhow::{Context, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use ocm_fem::bellows::{Bellows, BellowsConfig, Law, RigidMode};
 use ocm_fem::calibrate;
 use ocm_fem::mesh::{stl, vtk};
@@ -194,17 +194,6 @@ impl From<LawArg> for Law {
             LawArg::NeoHookeanBulk => Law::NeoHookeanBulk,
         }
     }
-}
-
-fn bar(n: usize, what: &str) -> ProgressBar {
-    let b = ProgressBar::new(n as u64);
-    if let Ok(style) =
-        ProgressStyle::with_template("{msg} {bar:40} {pos}/{len} [{elapsed_precise} < {eta}]")
-    {
-        b.set_style(style);
-    }
-    b.set_message(what.to_string());
-    b
 }
 
 /// Runs an `ocm fem` subcommand.

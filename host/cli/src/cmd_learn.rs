@@ -50,12 +50,17 @@ pub enum ModelKind {
     Forward,
     /// Inverse dynamics: [X_S, tau, dX_S/dt(t+1)] to P_S, cycle loss through a forward model.
     Inverse,
+    /// The mapping MLPs of App. D: f_SP (pressures to surrogate joints) and its inverse, from the
+    /// folder of `ocm surrogate map` (--data DIR: surrogate.json, fem_samples.json); with --rom
+    /// also f_RS (full-FEM pressures to the reduced model's pressures with the same TCP).
+    Map,
 }
 
 /// Where the trajectories come from and how they are split.
 #[derive(clap::Args, Debug, Clone)]
 pub struct DataArgs {
-    /// Reduced-FEM data set written by `ocm mor` (manifest.json + shards).
+    /// Reduced-FEM data set written by `ocm mor` (manifest.json + shards); for the mapping
+    /// networks, the folder of `ocm surrogate map` (surrogate.json, fem_samples.json).
     #[arg(long, value_name = "DIR", conflicts_with = "demo")]
     pub data: Option<PathBuf>,
     /// Use trajectories of a seeded lumped system (8 components like X_S) instead of a data set.
@@ -73,6 +78,10 @@ pub struct DataArgs {
     /// Fraction of the training sequences actually used (data-size ablations).
     #[arg(long, default_value_t = 1.0)]
     pub fraction: f64,
+    /// Leave out (and name on stderr) the sequences of --data that hold non-finite values
+    /// instead of refusing the data set.
+    #[arg(long)]
+    pub drop_nonfinite: bool,
 }
 
 /// Arguments of `ocm learn train`.
@@ -92,9 +101,9 @@ pub struct TrainArgs {
     /// Maximum epochs (the dissertation: 300 forward, 200 inverse).
     #[arg(long)]
     pub epochs: Option<usize>,
-    /// Batch size.
-    #[arg(long, default_value_t = 64)]
-    pub batch_size: usize,
+    /// Batch size (default: 64; 32 for the mapping networks, as App. D).
+    #[arg(long)]
+    pub batch_size: Option<usize>,
     /// Adam learning rate (default: 5e-4 forward, 1e-3 inverse, as in the dissertation).
     #[arg(long)]
     pub lr: Option<f64>,
@@ -104,9 +113,15 @@ pub struct TrainArgs {
     /// Cycle weight beta of the inverse loss.
     #[arg(long, default_value_t = DEFAULT_BETA)]
     pub beta: f64,
-    /// Early-stopping patience in epochs (0: never).
-    #[arg(long, default_value_t = 30)]
-    pub patience: usize,
+    /// Early-stopping patience in epochs, 0: never (default: 30; 20 for the mapping networks).
+    #[arg(long)]
+    pub patience: Option<usize>,
+    /// Reduced-model folder (`ocm mor reduce`) for f_RS (train map only).
+    #[arg(long)]
+    pub rom: Option<PathBuf>,
+    /// Bellows mesh for f_RS (default: the data directory's ManipulatorWhole25.vtk).
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
     /// Seed of weights, split and shuffling.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -122,8 +137,19 @@ pub struct TrainArgs {
 #[derive(clap::Args, Debug)]
 pub struct EvalArgs {
     /// Forward checkpoint.
+    #[arg(long, required_unless_present = "map")]
+    pub forward: Option<PathBuf>,
+    /// Folder of the mapping networks (`ocm learn train map`): scores f_SP against the
+    /// interpolant on the held-out samples of --data (an `ocm surrogate map` folder), and f_RS
+    /// when --rom is given and the folder holds it.
+    #[arg(long, conflicts_with = "forward")]
+    pub map: Option<PathBuf>,
+    /// Reduced-model folder for scoring f_RS.
     #[arg(long)]
-    pub forward: PathBuf,
+    pub rom: Option<PathBuf>,
+    /// Bellows mesh for f_RS (default: the data directory's ManipulatorWhole25.vtk).
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
     /// Inverse checkpoint (optional).
     #[arg(long)]
     pub inverse: Option<PathBuf>,
@@ -152,6 +178,17 @@ pub fn run(cmd: LearnCommand) -> Result<()> {
 /// Training and held-out trajectories.
 fn load(args: &DataArgs) -> Result<(Vec<Trajectory>, Vec<Trajectory>)> {
     let all = match (&args.data, args.demo) {
+        (Some(dir), _) if args.drop_nonfinite => {
+            let (_, trajs, dropped) = ocm_dynamics::dataset::read_finite_trajectories(dir)
+                .with_context(|| format!("reading data set {}", dir.display()))?;
+            if !dropped.is_empty() {
+                eprintln!(
+                    "left out {} sequence(s) with non-finite values: {dropped:?}",
+                    dropped.len()
+                );
+            }
+            trajs
+        }
         (Some(dir), _) => {
             ocm_dynamics::dataset::read_trajectories(dir)
                 .with_context(|| format!("reading data set {}", dir.display()))?
@@ -190,19 +227,22 @@ fn horizon_steps(horizon_s: f64, dt_s: f64) -> usize {
 }
 
 fn run_train(a: TrainArgs) -> Result<()> {
+    if a.kind == ModelKind::Map {
+        return crate::cmd_learn_map::train(&a);
+    }
     let (train, test) = load(&a.data)?;
     let n = train[0].state_dim;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let (epochs, lr) = match a.kind {
         ModelKind::Forward => (a.epochs.unwrap_or(300), a.lr.unwrap_or(5e-4)),
-        ModelKind::Inverse => (a.epochs.unwrap_or(200), a.lr.unwrap_or(1e-3)),
+        ModelKind::Inverse | ModelKind::Map => (a.epochs.unwrap_or(200), a.lr.unwrap_or(1e-3)),
     };
     let cfg = TrainConfig {
         epochs,
-        batch_size: a.batch_size,
+        batch_size: a.batch_size.unwrap_or(64),
         learning_rate: lr,
         val_fraction: 0.1,
-        patience: a.patience,
+        patience: a.patience.unwrap_or(30),
         grad_clip_norm: Some(1.0),
         seed: a.seed,
         progress: !a.json,
@@ -236,6 +276,7 @@ fn run_train(a: TrainArgs) -> Result<()> {
                 "lambda": a.lambda, "held_out": m,
             })
         }
+        ModelKind::Map => bail!("the mapping networks do not train on trajectories"),
         ModelKind::Inverse => {
             let fpath = a
                 .forward
@@ -304,9 +345,16 @@ struct EvalSummary {
 }
 
 fn run_eval(a: EvalArgs) -> Result<()> {
+    if let Some(dir) = &a.map {
+        return crate::cmd_learn_map::eval(dir, &a);
+    }
+    let fpath = a
+        .forward
+        .as_deref()
+        .context("--forward CKPT or --map DIR is required")?;
     let (_, test) = load(&a.data)?;
-    let fwd = TrainedForward::load(&a.forward)
-        .with_context(|| format!("loading {}", a.forward.display()))?;
+    let fwd =
+        TrainedForward::load(fpath).with_context(|| format!("loading {}", fpath.display()))?;
     let dt = test[0].dt_s;
     let forward = evaluate_forward(
         &fwd.model,

@@ -3,8 +3,8 @@
 
 use crate::cmd_fem::{BELLOWS_MESH, data_path};
 use crate::plot::{Chart, Series};
+use crate::progress::bar;
 use anyhow::{Context, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::DMatrix;
 use ocm_fem::bellows::{Bellows, BellowsConfig};
 use ocm_mor::curve::CurveOptions;
@@ -194,17 +194,6 @@ pub enum ModelArg {
     Full,
     /// The hyper-reduced model.
     Reduced,
-}
-
-fn bar(n: usize, what: &str) -> ProgressBar {
-    let b = ProgressBar::new(n as u64);
-    if let Ok(style) =
-        ProgressStyle::with_template("{msg} {bar:40} {pos}/{len} [{elapsed_precise} < {eta}]")
-    {
-        b.set_style(style);
-    }
-    b.set_message(what.to_string());
-    b
 }
 
 fn peak_rss_gib() -> Option<f64> {

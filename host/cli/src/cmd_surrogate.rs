@@ -3,8 +3,8 @@
 
 use crate::cmd_fem::{BELLOWS_MESH, data_path};
 use crate::plot::{Chart, Series};
+use crate::progress::bar;
 use anyhow::Context;
-use indicatif::{ProgressBar, ProgressStyle};
 use ocm_fem::bellows::{Bellows, BellowsConfig};
 use ocm_surrogate::bench::{BenchConfig, Engine};
 use ocm_surrogate::constraints::Limits;
@@ -103,17 +103,6 @@ pub enum SurrogateCommand {
         #[arg(long)]
         json: bool,
     },
-}
-
-fn bar(n: usize, what: &str) -> ProgressBar {
-    let b = ProgressBar::new(n as u64);
-    if let Ok(style) =
-        ProgressStyle::with_template("{msg} {bar:40} {pos}/{len} [{elapsed_precise} < {eta}]")
-    {
-        b.set_style(style);
-    }
-    b.set_message(what.to_string());
-    b
 }
 
 fn mkdir(out: &std::path::Path) -> anyhow::Result<()> {

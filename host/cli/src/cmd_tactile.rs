@@ -1,8 +1,8 @@
 //! `ocm tactile`: the DIGIT gel pressed by rigid indenters, contact masks and metrics.
 
 use crate::plot::{Chart, Series};
+use crate::progress::bar;
 use anyhow::{Context, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use ocm_tactile::gel::{Gel, GelMaterial};
 use ocm_tactile::image_io::read_gray;
 use ocm_tactile::indent::{IndentOptions, Indentation};
@@ -136,6 +136,41 @@ pub enum TactileCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Builds the NPE dataset: per set-up and depth the top-face nodal displacement and contact
+    /// force (FEM, cached per set-up and reused), pose, depth, total force and the contact
+    /// points in the sensor frame, as NPY with manifest.json naming shapes and units.
+    Dataset {
+        /// Data directory (default: OCM_DATA_DIR, else ../shared/data).
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// Gel mesh.
+        #[arg(long, value_enum, default_value = "fine")]
+        mesh: MeshArg,
+        /// Depth steps (all saved).
+        #[arg(long, default_value_t = 20)]
+        steps: usize,
+        /// Depth step, um.
+        #[arg(long, default_value_t = 50.0)]
+        step_um: f64,
+        /// Contact-point grid spacing, mm.
+        #[arg(long, default_value_t = 0.25)]
+        spacing_mm: f64,
+        /// Set-ups (comma-separated; default: all seen and unseen).
+        #[arg(long, value_delimiter = ',')]
+        setups: Vec<String>,
+        /// Only set-ups whose FEM cache folder exists (assemble what has been computed).
+        #[arg(long)]
+        cached_only: bool,
+        /// FEM cache: one folder per set-up of u_NNN.npy / f_NNN.npy.
+        #[arg(long, default_value = "out/npe/fem")]
+        cache: PathBuf,
+        /// Output folder.
+        #[arg(long, default_value = "out/npe/dataset")]
+        out: PathBuf,
+        /// Print the manifest as JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Compares two images: as masks (grey > 127) IoU, centroid and rotation errors in pixels
     /// and radians; as grey images L1, PSNR and SSIM.
     Metrics {
@@ -147,17 +182,6 @@ pub enum TactileCommand {
         #[arg(long)]
         json: bool,
     },
-}
-
-fn bar(n: usize, what: &str) -> ProgressBar {
-    let b = ProgressBar::new(n as u64);
-    if let Ok(style) =
-        ProgressStyle::with_template("{msg} {bar:40} {pos}/{len} [{elapsed_precise} < {eta}]")
-    {
-        b.set_style(style);
-    }
-    b.set_message(what.to_string());
-    b
 }
 
 /// Runs an `ocm tactile` subcommand.
@@ -324,6 +348,68 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             out,
             json,
         }),
+        TactileCommand::Dataset {
+            data,
+            mesh,
+            steps,
+            step_um,
+            spacing_mm,
+            setups,
+            cached_only,
+            cache,
+            out,
+            json,
+        } => {
+            let digit = ocm_datadir::data_file(data.as_deref(), "digit")?;
+            let mesh_file = match mesh {
+                MeshArg::Fine => "DIGIT_v8.vtk",
+                MeshArg::Coarse => "DIGIT_remesh2.vtk",
+            };
+            let gel = Gel::digit(digit.join(mesh_file), GelMaterial::default())?;
+            let all = digit_setups(&digit)?;
+            if let Some(bad) = setups.iter().find(|n| !all.iter().any(|s| &s.name == *n)) {
+                bail!("no set-up named '{bad}'");
+            }
+            let chosen: Vec<_> = all
+                .into_iter()
+                .filter(|s| setups.is_empty() || setups.contains(&s.name))
+                .filter(|s| !cached_only || cache.join(&s.name).is_dir())
+                .collect();
+            let opts = ocm_tactile::dataset::DatasetOptions {
+                steps,
+                step_m: step_um * 1e-6,
+                grid_spacing_m: spacing_mm * 1e-3,
+            };
+            let pb = bar(chosen.len(), "dataset");
+            let m = ocm_tactile::dataset::build(
+                &gel,
+                mesh_file,
+                &chosen,
+                &opts,
+                &cache,
+                &out,
+                |n, _| {
+                    pb.set_message(format!("dataset {n}"));
+                    pb.inc(1);
+                },
+            )?;
+            pb.finish_and_clear();
+            if json {
+                println!("{}", serde_json::to_string_pretty(&m)?);
+            } else {
+                let samples: usize = m.setups.iter().map(|s| s.samples).sum();
+                println!(
+                    "{} samples of {} set-ups ({} stopped early) on {} ({} top nodes) in {}",
+                    samples,
+                    m.setups.len(),
+                    m.stopped.len(),
+                    mesh_file,
+                    m.top_nodes,
+                    out.display()
+                );
+            }
+            Ok(())
+        }
         TactileCommand::Metrics { a, b, json } => {
             let ia = read_gray(&a)?;
             let ib = read_gray(&b)?;

@@ -5,14 +5,19 @@ use clap::{Parser, Subcommand};
 mod cmd_fem;
 mod cmd_ident;
 mod cmd_learn;
+mod cmd_learn_map;
 mod cmd_lut;
 mod cmd_model;
 mod cmd_mor;
+mod cmd_npe;
+mod cmd_peg;
+mod cmd_rl;
 mod cmd_surrogate;
 mod cmd_tactile;
 mod cmd_track;
 mod plot;
 mod plot_track;
+mod progress;
 
 /// Soft and origami robotics toolkit: physics, LUTs, firmware, simulation.
 #[derive(Parser, Debug)]
@@ -46,9 +51,18 @@ enum Command {
     /// Learned dynamics of the bellows manipulator: forward Transformer-PINN and inverse model.
     #[command(subcommand)]
     Learn(cmd_learn::LearnCommand),
+    /// Reinforcement learning on the surrogate: train (BC, PPO), evaluate, benchmark.
+    #[command(subcommand)]
+    Rl(cmd_rl::RlCommand),
+    /// Neural physics engine of the DIGIT gel: train, evaluate against the FEM, time.
+    #[command(subcommand)]
+    Npe(cmd_npe::NpeCommand),
     /// DIGIT tactile FEM: rigid indenters pressed into the gel, contact masks, metrics.
     #[command(subcommand)]
     Tactile(cmd_tactile::TactileCommand),
+    /// Peg-in-hole with two DIGIT pads: expert demonstrations, behaviour cloning, evaluation, replay.
+    #[command(subcommand)]
+    Peg(cmd_peg::PegCommand),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -63,5 +77,8 @@ fn main() -> anyhow::Result<()> {
         Command::Surrogate(cmd) => cmd_surrogate::run(cmd),
         Command::Learn(cmd) => cmd_learn::run(cmd),
         Command::Tactile(cmd) => cmd_tactile::run(cmd),
+        Command::Peg(cmd) => cmd_peg::run(cmd),
+        Command::Npe(cmd) => cmd_npe::run(cmd),
+        Command::Rl(cmd) => cmd_rl::run(cmd),
     }
 }

@@ -14,8 +14,38 @@ pub fn read_trajectories(dir: &Path) -> Result<(Manifest, Vec<Trajectory>)> {
     Ok((ds.manifest, trajs))
 }
 
-/// The data set's rows grouped by sequence index, in order.
+/// Reads the data set in `dir` like [`read_trajectories`], but leaves out every sequence that
+/// holds a non-finite value instead of failing; returns the indices of the sequences left out.
+pub fn read_finite_trajectories(dir: &Path) -> Result<(Manifest, Vec<Trajectory>, Vec<usize>)> {
+    let ds = read(dir, None)?;
+    let mut kept = Vec::new();
+    let mut dropped = Vec::new();
+    for (i, t) in group_sequences(&ds)?.into_iter().enumerate() {
+        let finite = [&t.pressure_kpa, &t.force_n, &t.state, &t.velocity]
+            .iter()
+            .all(|a| a.iter().all(|v| v.is_finite()));
+        if finite {
+            t.validate()
+                .map_err(|e| DynamicsError::Data(format!("sequence {i}: {e}")))?;
+            kept.push(t);
+        } else {
+            dropped.push(i);
+        }
+    }
+    Ok((ds.manifest, kept, dropped))
+}
+
+/// The data set's rows grouped by sequence index, in order, each sequence validated.
 pub fn split_sequences(ds: &Dataset) -> Result<Vec<Trajectory>> {
+    let out = group_sequences(ds)?;
+    for (i, t) in out.iter().enumerate() {
+        t.validate()
+            .map_err(|e| DynamicsError::Data(format!("sequence {i}: {e}")))?;
+    }
+    Ok(out)
+}
+
+fn group_sequences(ds: &Dataset) -> Result<Vec<Trajectory>> {
     let cols: Vec<usize> = ds.manifest.arrays.iter().map(|a| a.columns.len()).collect();
     let find = |file: &str| {
         ds.manifest
@@ -69,10 +99,6 @@ pub fn split_sequences(ds: &Dataset) -> Result<Vec<Trajectory>> {
             .extend_from_slice(&ds.arrays[ix][r * n..(r + 1) * n]);
         t.velocity
             .extend_from_slice(&ds.arrays[iv][r * n..(r + 1) * n]);
-    }
-    for (i, t) in out.iter().enumerate() {
-        t.validate()
-            .map_err(|e| DynamicsError::Data(format!("sequence {i}: {e}")))?;
     }
     Ok(out)
 }

@@ -9,7 +9,9 @@
 
 pub mod checkpoint;
 pub mod curve;
+pub mod deepsets;
 pub mod error;
+pub mod gcn;
 pub mod init;
 pub mod mlp;
 pub mod scaling;

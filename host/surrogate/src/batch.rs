@@ -147,10 +147,17 @@ impl BatchModel {
 
     /// Advances one environment by one step.
     pub fn step(&self, env: &mut EnvState) {
+        self.step_loaded(env, &[0.0; N_JOINTS]);
+    }
+
+    /// Advances one environment by one step with an extra generalised force `tau_ext` (N m for
+    /// rotations, N for extensions; e.g. J^T F of a load F at the TCP), held constant over the
+    /// step (explicit in the load, implicit in the motors).
+    pub fn step_loaded(&self, env: &mut EnvState, tau_ext: &Posture) {
         let (m, g) = self.mass_and_gravity(&env.q);
         let dt = self.dt;
         let mut a = m;
-        let mut rhs = m * Vec11::from(env.v) + g * dt;
+        let mut rhs = m * Vec11::from(env.v) + (g + Vec11::from(*tau_ext)) * dt;
         for j in 0..N_JOINTS {
             a[(j, j)] += dt * self.damping[j] + dt * dt * self.stiffness[j];
             rhs[j] += dt * self.stiffness[j] * (env.target[j] - env.q[j]);

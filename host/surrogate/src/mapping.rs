@@ -7,10 +7,11 @@
 //! Algorithm 1, but smooth at the solution) plus a very small penalty on the increments, which
 //! picks the smoothest of the redundant postures that reach the target equally well.
 //!
-//! f_SP is a cubic RBF interpolant ([`crate::rbf`]) of the optimised postures over the pressures,
-//! its output projected onto the feasible set; the dissertation's MLP belongs to the learned
-//! dynamics crate and can replace it. The inverse maps the three group means back to pressures
-//! with the same kind of interpolant.
+//! f_SP is by default a cubic RBF interpolant ([`crate::rbf`]) of the optimised postures over the
+//! pressures, its output projected onto the feasible set; the inverse maps the three group means
+//! back to pressures with the same kind of interpolant. Any other regression (the App. D MLPs of
+//! `ocm-dynamics`) can replace both through [`Regressor`] and [`ActuationMap::with_regressor`],
+//! without this crate depending on the learning stack.
 
 use crate::chain::{ChainGeometry, GROUPS, KINDS, N_JOINTS, Posture};
 use crate::constraints::Limits;
@@ -24,6 +25,7 @@ use ganesh::traits::{Algorithm, CostFunction, Gradient};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::convert::Infallible;
+use std::sync::Arc;
 
 /// Settings of Algorithm 1.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -207,8 +209,20 @@ pub fn group_means(q: &Posture) -> [f64; 3] {
     std::array::from_fn(|g| GROUPS[g].iter().map(|&j| q[j]).sum::<f64>() / GROUPS[g].len() as f64)
 }
 
-/// f_SP and its inverse.
-#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+/// A regression that stands in for the interpolants of [`ActuationMap`]: f_SP from chamber
+/// pressures to a posture and its inverse from group means to pressures. The map projects the
+/// posture onto the feasible set and checks inputs itself; implementations only regress.
+pub trait Regressor: Send + Sync + std::fmt::Debug {
+    /// Short name reported with the map's figures (`mlp`, ...).
+    fn name(&self) -> &str;
+    /// Raw posture for pressures in kPa (projected by the caller).
+    fn posture(&self, pressures_kpa: &[f64; 3]) -> Result<Posture>;
+    /// Pressures in kPa for group means (theta_x rad, theta_y rad, d m).
+    fn pressures(&self, group_means: &[f64; 3]) -> Result<[f64; 3]>;
+}
+
+/// f_SP and its inverse: the stored interpolants, or an external [`Regressor`] when one is set.
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ActuationMap {
     /// Pressures (kPa) -> posture.
     pub forward: Rbf,
@@ -216,6 +230,24 @@ pub struct ActuationMap {
     pub inverse: Rbf,
     /// Limits the forward output is projected onto.
     pub limits: Limits,
+    /// A regression used instead of both interpolants (not stored in the model file: it lives
+    /// in its own checkpoints and is attached after reading).
+    #[serde(skip)]
+    pub regressor: Option<Arc<dyn Regressor>>,
+}
+
+impl PartialEq for ActuationMap {
+    fn eq(&self, other: &Self) -> bool {
+        let same_regressor = match (&self.regressor, &other.regressor) {
+            (None, None) => true,
+            (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+            _ => false,
+        };
+        same_regressor
+            && self.forward == other.forward
+            && self.inverse == other.inverse
+            && self.limits == other.limits
+    }
 }
 
 impl ActuationMap {
@@ -231,21 +263,136 @@ impl ActuationMap {
             forward: Rbf::fit(&p, &q)?,
             inverse: Rbf::fit(&g, &p)?,
             limits: *limits,
+            regressor: None,
         })
+    }
+
+    /// The same map with `regressor` used for f_SP and its inverse instead of the interpolants.
+    pub fn with_regressor(mut self, regressor: Arc<dyn Regressor>) -> Self {
+        self.regressor = Some(regressor);
+        self
+    }
+
+    /// Which regression answers: `rbf` (the stored interpolants) or the regressor's name.
+    pub fn regression_name(&self) -> &str {
+        self.regressor.as_deref().map_or("rbf", |r| r.name())
     }
 
     /// f_SP: the feasible posture for chamber pressures in kPa (-20..35).
     pub fn posture(&self, pressures_kpa: &[f64; 3]) -> Result<Posture> {
         ocm_fem::bellows::check_pressures(pressures_kpa)?;
-        let y = self.forward.eval(pressures_kpa);
-        let q: Posture = std::array::from_fn(|j| y[j]);
+        let q: Posture = match &self.regressor {
+            Some(r) => r.posture(pressures_kpa)?,
+            None => {
+                let y = self.forward.eval(pressures_kpa);
+                std::array::from_fn(|j| y[j])
+            }
+        };
         self.limits.project(&q)
     }
 
     /// Inverse of f_SP: pressures in kPa for a posture (through its group means).
     pub fn pressures(&self, q: &Posture) -> Result<[f64; 3]> {
         self.limits.check(q)?;
-        let y = self.inverse.eval(&group_means(q));
-        Ok([y[0], y[1], y[2]])
+        let g = group_means(q);
+        match &self.regressor {
+            Some(r) => r.pressures(&g),
+            None => {
+                let y = self.inverse.eval(&g);
+                Ok([y[0], y[1], y[2]])
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A regressor with known outputs: every joint at `value`, pressures = 100 x the means.
+    #[derive(Debug)]
+    struct Fixed {
+        value: f64,
+    }
+
+    impl Regressor for Fixed {
+        fn name(&self) -> &str {
+            "fixed"
+        }
+        fn posture(&self, _: &[f64; 3]) -> Result<Posture> {
+            Ok([self.value; N_JOINTS])
+        }
+        fn pressures(&self, g: &[f64; 3]) -> Result<[f64; 3]> {
+            Ok(g.map(|v| 100.0 * v))
+        }
+    }
+
+    fn interpolant_map() -> ActuationMap {
+        // Postures linear in the pressures: the interpolant reproduces linear data exactly.
+        let limits = Limits::default();
+        let mut p = vec![];
+        let mut q = vec![];
+        for a in [-20.0, 0.0, 35.0] {
+            for b in [-20.0, 10.0, 35.0] {
+                for c in [-20.0, 35.0] {
+                    p.push(vec![a, b, c]);
+                    let posture: Vec<f64> = (0..N_JOINTS)
+                        .map(|j| match KINDS[j] {
+                            crate::chain::JointKind::Prismatic => 1e-4 * (a + b + c + 60.0) / 3.0,
+                            crate::chain::JointKind::RevoluteX => 1e-4 * (a - b),
+                            crate::chain::JointKind::RevoluteY => 1e-4 * (a - c),
+                        })
+                        .collect();
+                    q.push(posture);
+                }
+            }
+        }
+        let g: Vec<Vec<f64>> = q
+            .iter()
+            .map(|q| group_means(&std::array::from_fn(|j| q[j])).to_vec())
+            .collect();
+        ActuationMap {
+            forward: Rbf::fit(&p, &q).unwrap(),
+            inverse: Rbf::fit(&g, &p).unwrap(),
+            limits,
+            regressor: None,
+        }
+    }
+
+    #[test]
+    fn a_regressor_replaces_the_interpolants_and_is_projected() {
+        let map = interpolant_map();
+        assert_eq!(map.regression_name(), "rbf");
+        let q = map.posture(&[10.0, -5.0, 3.0]).unwrap();
+        assert!((q[0] - 1.5e-3).abs() < 1e-9, "interpolant posture {q:?}");
+        let ext = map.clone().with_regressor(Arc::new(Fixed { value: 0.5 }));
+        assert_eq!(ext.regression_name(), "fixed");
+        assert!(
+            ext != map,
+            "a map with a regressor differs from one without"
+        );
+        // 0.5 rad / 0.5 m are outside the limits: the map projects the regressor's output.
+        let q = ext.posture(&[10.0, -5.0, 3.0]).unwrap();
+        map.limits.check(&q).unwrap();
+        assert!((q[0] - 0.2).abs() < 1e-12 && (q[2] - 0.02).abs() < 1e-12);
+        let p = ext.pressures(&q).unwrap();
+        let g = group_means(&q);
+        for k in 0..3 {
+            assert!((p[k] - 100.0 * g[k]).abs() < 1e-12);
+        }
+        // Inputs are still checked by the map, whatever answers.
+        assert!(ext.posture(&[50.0, 0.0, 0.0]).is_err());
+        assert!(ext.pressures(&[1.0; N_JOINTS]).is_err());
+        // The regressor is not stored: a written and read map answers with the interpolants.
+        let back: ActuationMap =
+            serde_json::from_str(&serde_json::to_string(&ext).unwrap()).unwrap();
+        assert!(back.regressor.is_none() && back.regression_name() == "rbf");
+        let (a, b) = (
+            back.posture(&[10.0, -5.0, 3.0]).unwrap(),
+            map.posture(&[10.0, -5.0, 3.0]).unwrap(),
+        );
+        for j in 0..N_JOINTS {
+            assert!((a[j] - b[j]).abs() < 1e-12);
+        }
     }
 }

@@ -11,6 +11,7 @@
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod contact;
+pub mod dataset;
 pub mod error;
 pub mod gel;
 pub mod image_io;

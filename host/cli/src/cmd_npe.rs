@@ -1,0 +1,379 @@
+//! `ocm npe`: train, evaluate and time the neural physics engine of the DIGIT gel.
+
+use crate::plot::{Chart, Series};
+use anyhow::Context;
+use ocm_npe::data::{Prepared, SetupSplit};
+use ocm_npe::eval::{SampleScore, Scores, evaluate};
+use ocm_npe::fit::{FitOptions, fit};
+use ocm_npe::{Npe, figure};
+use ocm_tactile::dataset::{Dataset, TopSurface};
+use ocm_tactile::gel::{Gel, GelMaterial};
+use std::path::{Path, PathBuf};
+
+/// NPE subcommands.
+#[derive(clap::Subcommand, Debug)]
+pub enum NpeCommand {
+    /// Trains the engine on a dataset of `ocm tactile dataset`, split by set-up (held-out seen
+    /// set-ups and the unseen indenters are never trained on); writes npe.ckpt, the loss curve
+    /// (CSV, PNG) and the split.
+    Train {
+        /// Dataset folder.
+        #[arg(long, default_value = "out/npe/dataset")]
+        dataset: PathBuf,
+        /// Output folder.
+        #[arg(long, default_value = "out/npe/model")]
+        out: PathBuf,
+        /// Most epochs.
+        #[arg(long, default_value_t = 40)]
+        epochs: usize,
+        /// Samples per step.
+        #[arg(long, default_value_t = 8)]
+        batch: usize,
+        /// Adam step size.
+        #[arg(long, default_value_t = 2e-3)]
+        lr: f64,
+        /// Early-stopping patience, epochs.
+        #[arg(long, default_value_t = 10)]
+        patience: usize,
+        /// Node state width.
+        #[arg(long, default_value_t = 32)]
+        width: usize,
+        /// GCN layers.
+        #[arg(long, default_value_t = 6)]
+        layers: usize,
+        /// Seed of weights, split and shuffling.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Seen set-ups held out for the test.
+        #[arg(long, default_value_t = 8)]
+        test_setups: usize,
+        /// Seen set-ups held out for validation (early stopping).
+        #[arg(long, default_value_t = 5)]
+        val_setups: usize,
+        /// Leave the contact points out (the ablation without geometry).
+        #[arg(long)]
+        no_geometry: bool,
+        /// Leave the force out (the FEM point network: geometry and depth only).
+        #[arg(long)]
+        no_force: bool,
+        /// Print a JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Scores a trained engine against the FEM (Table 6.1) on the held-out seen set-ups and the
+    /// unseen indenters, separately; writes scores.json, per-sample CSVs, plots and field
+    /// images (FEM | NPE | |difference|).
+    Eval {
+        /// Checkpoint of `ocm npe train`.
+        #[arg(long, default_value = "out/npe/model/npe.ckpt")]
+        model: PathBuf,
+        /// Dataset folder.
+        #[arg(long, default_value = "out/npe/dataset")]
+        dataset: PathBuf,
+        /// Data directory (default: OCM_DATA_DIR, else ../shared/data), for the gel mesh.
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// Output folder (default: beside the checkpoint, eval/).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Field images per group.
+        #[arg(long, default_value_t = 4)]
+        images: usize,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Median latency of one engine call on one sample of the held-out set (the one with the
+    /// most contact points), with the CPU backend on `--threads` threads.
+    Bench {
+        /// Checkpoint of `ocm npe train`.
+        #[arg(long, default_value = "out/npe/model/npe.ckpt")]
+        model: PathBuf,
+        /// Dataset folder.
+        #[arg(long, default_value = "out/npe/dataset")]
+        dataset: PathBuf,
+        /// Timed calls.
+        #[arg(long, default_value_t = 200)]
+        calls: usize,
+        /// Worker threads.
+        #[arg(long, default_value_t = 1)]
+        threads: usize,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {
+    std::fs::write(path, serde_json::to_string_pretty(v)?)
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+fn split_of(model: &Path) -> anyhow::Result<SetupSplit> {
+    let meta = Npe::run_meta(model)?;
+    serde_json::from_value(meta["split"].clone())
+        .with_context(|| format!("{}: no set-up split stored", model.display()))
+}
+
+fn write_scores_csv(path: &Path, per: &[SampleScore]) -> anyhow::Result<()> {
+    let mut s = String::from(
+        "setup,depth_mm,contact_accuracy,rmse_mm,orientation_deg,force_pred_n,force_fem_n\n",
+    );
+    for r in per {
+        s.push_str(&format!(
+            "{},{:.3},{:.5},{:.5},{},{:.5},{:.5}\n",
+            r.setup,
+            r.depth_mm,
+            r.contact_accuracy,
+            r.rmse_mm,
+            r.orientation_deg
+                .map_or(String::new(), |v| format!("{v:.4}")),
+            r.force_pred_n,
+            r.force_fem_n
+        ));
+    }
+    std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))
+}
+
+fn line(name: &str, s: &Scores) -> String {
+    format!(
+        "{name:<14} {:>4} samples | contact nodes {:.2} % | RMSE {:.4} +- {:.4} mm (pooled {:.4}) | orientation {:.2} +- {:.2} deg ({} elongated) | force RMSE {:.4} N",
+        s.samples,
+        s.contact_accuracy_pct,
+        s.rmse_mm[0],
+        s.rmse_mm[1],
+        s.rmse_pooled_mm,
+        s.orientation_deg[0],
+        s.orientation_deg[1],
+        s.orientation_samples,
+        s.force_rmse_n
+    )
+}
+
+/// Runs an `ocm npe` subcommand.
+pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
+    match cmd {
+        NpeCommand::Train {
+            dataset,
+            out,
+            epochs,
+            batch,
+            lr,
+            patience,
+            width,
+            layers,
+            seed,
+            test_setups,
+            val_setups,
+            no_geometry,
+            no_force,
+            json,
+        } => {
+            let ds = Dataset::read(&dataset)?;
+            let p =
+                Prepared::from_dataset(&ds, &ocm_npe::model::NpeConfig::new([0.0; 3], 1e-3).scales);
+            drop(ds);
+            let opts = FitOptions {
+                epochs,
+                batch_size: batch,
+                learning_rate: lr,
+                patience,
+                seed,
+                use_geometry: !no_geometry,
+                use_force: !no_force,
+                width,
+                layers,
+                test_setups,
+                val_setups,
+                progress: !json,
+            };
+            let r = fit(&p, &opts)?;
+            std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+            let ckpt = out.join("npe.ckpt");
+            let meta = serde_json::json!({
+                "split": r.split,
+                "options": opts,
+                "dataset": dataset.display().to_string(),
+                "train_samples": r.train_samples,
+                "best_epoch": r.best_epoch,
+                "best_val_loss": r.best_loss,
+                "seconds": r.seconds,
+            });
+            r.npe.save(&ckpt, meta.clone())?;
+            ocm_learn::write_curve(&out, "loss", "NPE loss (eq 6.17, scaled units)", &r.curve)?;
+            write_json(&out.join("train.json"), &meta)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&meta)?);
+            } else {
+                println!(
+                    "trained on {} samples of {} set-ups in {:.0} s; best epoch {} (validation loss {:.4e}); {}",
+                    r.train_samples,
+                    r.split.train.len(),
+                    r.seconds,
+                    r.best_epoch,
+                    r.best_loss,
+                    ckpt.display()
+                );
+            }
+            Ok(())
+        }
+        NpeCommand::Eval {
+            model,
+            dataset,
+            data,
+            out,
+            images,
+            json,
+        } => {
+            let npe = Npe::load(&model)?;
+            let split = split_of(&model)?;
+            let ds = Dataset::read(&dataset)?;
+            let p = Prepared::from_dataset(&ds, &npe.config.scales);
+            let digit = ocm_datadir::data_file(data.as_deref(), "digit")?;
+            let gel = Gel::digit(
+                digit.join(&ds.manifest.mesh),
+                GelMaterial {
+                    young_pa: ds.manifest.material[0],
+                    poisson: ds.manifest.material[1],
+                },
+            )?;
+            let top = TopSurface::from_gel(&gel);
+            anyhow::ensure!(
+                top.nodes.len() == npe.surface.rest_m.len(),
+                "the mesh has {} top nodes, the engine {}",
+                top.nodes.len(),
+                npe.surface.rest_m.len()
+            );
+            let out = out.unwrap_or_else(|| model.parent().unwrap_or(Path::new(".")).join("eval"));
+            std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+            let mut summary = serde_json::Map::new();
+            let mut text = Vec::new();
+            for (name, setups) in [("held-out seen", &split.test), ("unseen", &split.unseen)] {
+                let idx = p.samples_of(setups);
+                if idx.is_empty() {
+                    text.push(format!("{name}: no samples"));
+                    continue;
+                }
+                let (scores, per) = evaluate(&npe, &p, &idx, &gel, &top, 8)?;
+                let stem = name.replace([' ', '-'], "_");
+                write_scores_csv(&out.join(format!("{stem}.csv")), &per)?;
+                Chart {
+                    title: &format!("NPE vs FEM total force, {name} set-ups"),
+                    x_label: "FEM force F_z [N]",
+                    y_label: "NPE force F_z [N]",
+                    series: vec![Series {
+                        label: "samples".into(),
+                        points: per
+                            .iter()
+                            .map(|s| (s.force_fem_n, s.force_pred_n))
+                            .collect(),
+                        dots: true,
+                    }],
+                    equal_axes: true,
+                }
+                .write(&out, &format!("{stem}_force"))?;
+                Chart {
+                    title: &format!("NPE displacement RMSE against depth, {name} set-ups"),
+                    x_label: "depth [mm]",
+                    y_label: "nodal displacement RMSE [mm]",
+                    series: vec![Series {
+                        label: "samples".into(),
+                        points: per.iter().map(|s| (s.depth_mm, s.rmse_mm)).collect(),
+                        dots: true,
+                    }],
+                    equal_axes: false,
+                }
+                .write(&out, &format!("{stem}_rmse"))?;
+                // Images of the deepest sample of the first few set-ups.
+                for setup in setups.iter().take(images) {
+                    let Some(&i) = idx
+                        .iter()
+                        .filter(|&&i| &p.setup_names[p.samples[i].setup] == setup)
+                        .max_by(|&&a, &&b| p.samples[a].depth_m.total_cmp(&p.samples[b].depth_m))
+                    else {
+                        continue;
+                    };
+                    let s = &p.samples[i];
+                    let pred = npe.predict(&s.points_m, s.force_n[2], s.depth_m)?;
+                    let sc = npe.config.scales.displacement_m;
+                    let fem: Vec<[f64; 3]> = s
+                        .target
+                        .chunks(6)
+                        .map(|r| [0, 1, 2].map(|k| f64::from(r[k]) * sc))
+                        .collect();
+                    figure::write_comparison(
+                        &out.join(format!("field_{setup}.png")),
+                        &gel,
+                        &top,
+                        &fem,
+                        &pred.displacement_m,
+                    )?;
+                }
+                text.push(line(name, &scores));
+                summary.insert(name.to_string(), serde_json::to_value(&scores)?);
+            }
+            summary.insert("model".into(), model.display().to_string().into());
+            summary.insert("split".into(), serde_json::to_value(&split)?);
+            let summary = serde_json::Value::Object(summary);
+            write_json(&out.join("scores.json"), &summary)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                for t in text {
+                    println!("{t}");
+                }
+                println!("files in {}", out.display());
+            }
+            Ok(())
+        }
+        NpeCommand::Bench {
+            model,
+            dataset,
+            calls,
+            threads,
+            json,
+        } => {
+            let npe = Npe::load(&model)?;
+            let split = split_of(&model)?;
+            let ds = Dataset::read(&dataset)?;
+            let p = Prepared::from_dataset(&ds, &npe.config.scales);
+            let idx = p.samples_of(&split.test);
+            let &i = idx
+                .iter()
+                .max_by_key(|&&i| p.samples[i].points_m.len())
+                .context("no held-out sample to time")?;
+            let s = &p.samples[i];
+            let lat = ocm_npe::bench::latency(
+                &npe,
+                &s.points_m,
+                s.force_n[2],
+                s.depth_m,
+                10,
+                calls,
+                threads,
+            )?;
+            let v = serde_json::json!({
+                "latency": lat,
+                "threads": threads,
+                "setup": p.setup_names[s.setup],
+                "depth_mm": s.depth_m * 1e3,
+                "nodes": npe.surface.rest_m.len(),
+            });
+            if json {
+                println!("{}", serde_json::to_string_pretty(&v)?);
+            } else {
+                println!(
+                    "NPE call ({} nodes, {} points, {} thread(s)): median {:.3} ms, p10 {:.3} ms, p90 {:.3} ms over {} calls",
+                    npe.surface.rest_m.len(),
+                    lat.points,
+                    threads,
+                    lat.median_ms,
+                    lat.p10_p90_ms[0],
+                    lat.p10_p90_ms[1],
+                    lat.calls
+                );
+            }
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,439 @@
+//! `ocm peg`: peg-in-hole with two DIGIT pads: expert demonstrations, behaviour cloning with and
+//! without touch, evaluation on randomised trials, trajectory replay.
+
+use crate::plot::{Chart, Series};
+use crate::progress::bar;
+use anyhow::Context;
+use ocm_peg::replay::{read_path, replay, write_frames};
+use ocm_peg::{
+    ActionNoise, BcConfig, BcPolicy, ContactFeatures, DemoSet, DemoSettings, Evaluation,
+    ExpertConfig, InHandError, Randomisation, SceneConfig, TrialSpec, evaluate_expert,
+    evaluate_policy, train_bc,
+};
+use std::path::{Path, PathBuf};
+
+/// Peg subcommands.
+#[derive(clap::Subcommand, Debug)]
+pub enum PegCommand {
+    /// Runs the privileged scripted expert (noisy execution, clean labels) on seeded random
+    /// trials until COUNT have inserted the peg; writes obs.npy, actions.npy, episodes.npy,
+    /// demos.json and paths/demo_NNN.csv into OUT.
+    Demos {
+        /// Successful demonstrations to keep.
+        #[arg(long, default_value_t = 137)]
+        count: usize,
+        /// Seed of the trials and of the execution noise.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Print a JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Behaviour cloning (eq 6.19) on the demonstrations in DEMOS: the touch policy
+    /// ([proprioception, Z_left, Z_right]) and the no-touch baseline (proprioception only);
+    /// writes policy_touch.ckpt, policy_notouch.ckpt and their loss curves into OUT.
+    Train {
+        /// Folder written by `ocm peg demos`.
+        demos: PathBuf,
+        /// Training epochs (upper bound; early stopping on the validation loss).
+        #[arg(long, default_value_t = 60)]
+        epochs: usize,
+        /// Seed of the weights, the split and the shuffling.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Print a JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Success rates over TRIALS randomised trials (a seed other than the demonstrations') of
+    /// the touch policy, the no-touch baseline and the expert; writes eval.csv, eval.json and
+    /// the tip-depth plots into OUT.
+    Eval {
+        /// Folder with policy_touch.ckpt and policy_notouch.ckpt (from `ocm peg train`).
+        policies: PathBuf,
+        /// Trials per controller.
+        #[arg(long, default_value_t = 100)]
+        trials: usize,
+        /// Seed of the trials.
+        #[arg(long, default_value_t = 1000)]
+        seed: u64,
+        /// Output folder (default: POLICIES).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Print a JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Replays a gripper path (CSV: time_s, x_m, y_m, z_m, roll_rad in the hole frame) holding
+    /// the peg with the given in-hand error; writes per-frame contact points, latents and
+    /// forces (NPY, CSV) and a plot into OUT.
+    Replay {
+        /// The path CSV (e.g. paths/demo_000.csv of `ocm peg demos`).
+        path: PathBuf,
+        /// In-hand offset along the pads' horizontal direction, mm.
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        offset_y_mm: f64,
+        /// In-hand offset along the fingers, mm.
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        offset_z_mm: f64,
+        /// In-hand tilt, degrees.
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        tilt_deg: f64,
+        /// Take the in-hand error of demonstration N from the demos.json beside the path's
+        /// folder (overrides the three values above).
+        #[arg(long)]
+        demo: Option<usize>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Print a JSON summary.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn mkdir(out: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))
+}
+
+fn tip_depth_chart(out: &Path, stem: &str, title: &str, ev: &Evaluation) -> anyhow::Result<()> {
+    let series = ev
+        .tip_paths
+        .iter()
+        .zip(&ev.outcomes)
+        .take(20)
+        .enumerate()
+        .map(|(i, (p, o))| Series {
+            label: format!(
+                "trial {i} ({})",
+                if o.success { "inserted" } else { "failed" }
+            ),
+            points: p.iter().map(|r| (r[0], r[3] * 1e3)).collect(),
+            dots: false,
+        })
+        .collect();
+    Chart {
+        title,
+        x_label: "time (s)",
+        y_label: "peg tip height above the board (mm)",
+        series,
+        equal_axes: false,
+    }
+    .write(out, stem)
+}
+
+/// Runs a peg subcommand.
+pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
+    match cmd {
+        PegCommand::Demos {
+            count,
+            seed,
+            out,
+            json,
+        } => {
+            mkdir(&out)?;
+            let settings = DemoSettings {
+                count,
+                seed,
+                scene: SceneConfig::default(),
+                randomisation: Randomisation::default(),
+                expert: ExpertConfig::default(),
+                noise: ActionNoise::default(),
+            };
+            let pb = bar(count, "expert demonstrations");
+            let t = std::time::Instant::now();
+            let set = DemoSet::collect(&settings, &ContactFeatures, &mut |k| {
+                pb.set_position(k as u64)
+            })?;
+            pb.finish_and_clear();
+            let secs = t.elapsed().as_secs_f64();
+            set.save(&out)?;
+            let tried = set.outcomes.len();
+            let summary = serde_json::json!({
+                "demos": set.demos(),
+                "trials_run": tried,
+                "expert_success_rate": set.demos() as f64 / tried.max(1) as f64,
+                "rows": set.rows(),
+                "encoder": set.encoder,
+                "seed": seed,
+                "wall_time_s": secs,
+                "out": out,
+            });
+            if json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                println!(
+                    "{} demonstrations ({} trials run), {} control steps, {:.1} s -> {}",
+                    set.demos(),
+                    tried,
+                    set.rows(),
+                    secs,
+                    out.display()
+                );
+            }
+            Ok(())
+        }
+        PegCommand::Train {
+            demos,
+            epochs,
+            seed,
+            out,
+            json,
+        } => {
+            mkdir(&out)?;
+            let set = DemoSet::load(&demos)?;
+            let mut cfg = BcConfig::default();
+            cfg.train.epochs = epochs;
+            cfg.train.seed = seed;
+            cfg.train.progress = !json;
+            cfg.weight_seed = seed;
+            let mut summary = serde_json::Map::new();
+            for (touch, name) in [(true, "touch"), (false, "notouch")] {
+                let tr = train_bc(&set, touch, &cfg)?;
+                tr.policy.save(&out.join(format!("policy_{name}.ckpt")))?;
+                ocm_learn::write_curve(
+                    &out,
+                    &format!("loss_{name}"),
+                    &format!("behaviour cloning, {name}"),
+                    &tr.curve,
+                )?;
+                let m = &tr.policy.meta;
+                if !json {
+                    println!(
+                        "{name}: {} demos, {} rows, best epoch {} (val loss {:.4}), {:.1} s",
+                        m.demos, m.rows, m.best_epoch, m.best_loss, m.train_time_s
+                    );
+                }
+                summary.insert(name.into(), serde_json::to_value(m)?);
+            }
+            if json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            }
+            Ok(())
+        }
+        PegCommand::Eval {
+            policies,
+            trials,
+            seed,
+            out,
+            json,
+        } => {
+            let out = out.unwrap_or_else(|| policies.clone());
+            mkdir(&out)?;
+            let scene = SceneConfig::default();
+            let rand = Randomisation::default();
+            let spec = TrialSpec {
+                scene: &scene,
+                randomisation: &rand,
+                seed,
+                trials,
+            };
+            let mut evals = Vec::new();
+            for name in ["touch", "notouch"] {
+                let p = BcPolicy::load(&policies.join(format!("policy_{name}.ckpt")))?;
+                let pb = bar(scene.max_control_steps(), &format!("{name} policy"));
+                let t = std::time::Instant::now();
+                let ev = evaluate_policy(name, &p, spec, &ContactFeatures, &mut |k| {
+                    pb.set_position(k as u64)
+                })?;
+                pb.finish_and_clear();
+                evals.push((ev, t.elapsed().as_secs_f64()));
+            }
+            let t = std::time::Instant::now();
+            let ex = evaluate_expert(&ExpertConfig::default(), spec, &ContactFeatures)?;
+            evals.push((ex, t.elapsed().as_secs_f64()));
+            let mut w = csv::Writer::from_path(out.join("eval.csv"))?;
+            w.write_record([
+                "controller",
+                "trial",
+                "success",
+                "time_s",
+                "tip_x_m",
+                "tip_y_m",
+                "tip_z_m",
+                "offset_y_m",
+                "offset_z_m",
+                "tilt_rad",
+            ])?;
+            let mut summary = Vec::new();
+            for (ev, secs) in &evals {
+                for o in &ev.outcomes {
+                    let e = o.trial.error;
+                    w.write_record([
+                        ev.controller.clone(),
+                        o.trial.index.to_string(),
+                        u8::from(o.success).to_string(),
+                        format!("{:.4}", o.time_s),
+                        format!("{:.6e}", o.tip_m[0]),
+                        format!("{:.6e}", o.tip_m[1]),
+                        format!("{:.6e}", o.tip_m[2]),
+                        format!("{:.6e}", e.offset_y_m),
+                        format!("{:.6e}", e.offset_z_m),
+                        format!("{:.6e}", e.tilt_rad),
+                    ])?;
+                }
+                tip_depth_chart(
+                    &out,
+                    &format!("tip_depth_{}", ev.controller),
+                    &format!(
+                        "{}: {:.0} % inserted",
+                        ev.controller,
+                        100.0 * ev.success_rate()
+                    ),
+                    ev,
+                )?;
+                summary.push(serde_json::json!({
+                    "controller": ev.controller,
+                    "trials": ev.outcomes.len(),
+                    "success_rate": ev.success_rate(),
+                    "median_success_time_s": ev.median_success_time_s(),
+                    "wall_time_s": secs,
+                }));
+            }
+            w.flush()?;
+            // Success against the size of the in-hand error (what touch has to reveal).
+            // Each controller's dots sit slightly apart so that they do not hide each other.
+            let series = evals
+                .iter()
+                .enumerate()
+                .map(|(k, (ev, _))| Series {
+                    label: format!(
+                        "{} (1 = inserted, drawn {:+.2} apart)",
+                        ev.controller,
+                        0.05 * k as f64
+                    ),
+                    points: ev
+                        .outcomes
+                        .iter()
+                        .map(|o| {
+                            let e = o.trial.error;
+                            let lateral = (e.offset_y_m
+                                + (scene.peg_length_m - scene.peg_top_m) * e.tilt_rad.sin())
+                            .abs();
+                            (
+                                lateral * 1e3,
+                                f64::from(u8::from(o.success)) + 0.05 * k as f64,
+                            )
+                        })
+                        .collect(),
+                    dots: true,
+                })
+                .collect();
+            Chart {
+                title: "success against the in-hand error at the tip",
+                x_label: "|tip displacement by the in-hand error| (mm)",
+                y_label: "inserted",
+                series,
+                equal_axes: false,
+            }
+            .write(&out, "success_vs_error")?;
+            let report = serde_json::json!({ "seed": seed, "controllers": summary });
+            std::fs::write(
+                out.join("eval.json"),
+                serde_json::to_string_pretty(&report)?,
+            )?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                for (ev, secs) in &evals {
+                    println!(
+                        "{:8} {:5.1} % inserted over {} trials (median {:.2} s to insert), {:.1} s",
+                        ev.controller,
+                        100.0 * ev.success_rate(),
+                        ev.outcomes.len(),
+                        ev.median_success_time_s(),
+                        secs
+                    );
+                }
+            }
+            Ok(())
+        }
+        PegCommand::Replay {
+            path,
+            offset_y_mm,
+            offset_z_mm,
+            tilt_deg,
+            demo,
+            out,
+            json,
+        } => {
+            mkdir(&out)?;
+            let rows = read_path(&path)?;
+            let scene = SceneConfig::default();
+            let error = match demo {
+                Some(k) => {
+                    let dir = path
+                        .parent()
+                        .and_then(Path::parent)
+                        .context("the path has no demos folder above it")?;
+                    let set = DemoSet::load(dir)?;
+                    set.outcomes
+                        .iter()
+                        .filter(|o| o.success)
+                        .nth(k)
+                        .with_context(|| format!("{} has no demonstration {k}", dir.display()))?
+                        .trial
+                        .error
+                }
+                None => InHandError {
+                    offset_y_m: offset_y_mm * 1e-3,
+                    offset_z_m: offset_z_mm * 1e-3,
+                    tilt_rad: tilt_deg.to_radians(),
+                },
+            };
+            let pb = bar(0, "replay");
+            let frames = replay(&scene, &rows, error, &ContactFeatures, &mut |k, n| {
+                pb.set_length(n as u64);
+                pb.set_position(k as u64);
+            })?;
+            pb.finish_and_clear();
+            write_frames(&out, &frames, error, "contact-features")?;
+            let series = vec![
+                Series {
+                    label: "left sensor".into(),
+                    points: frames.iter().map(|f| (f.time_s, f.force_n[0])).collect(),
+                    dots: false,
+                },
+                Series {
+                    label: "right sensor".into(),
+                    points: frames.iter().map(|f| (f.time_s, f.force_n[1])).collect(),
+                    dots: false,
+                },
+                Series {
+                    label: "peg tip height (mm)".into(),
+                    points: frames
+                        .iter()
+                        .map(|f| (f.time_s, f.tip_m[2] * 1e3))
+                        .collect(),
+                    dots: false,
+                },
+            ];
+            Chart {
+                title: "replay: normal force per sensor and tip height",
+                x_label: "time (s)",
+                y_label: "force (N) / height (mm)",
+                series,
+                equal_axes: false,
+            }
+            .write(&out, "replay")?;
+            let summary = serde_json::json!({
+                "frames": frames.len(),
+                "in_hand_error": error,
+                "final_tip_m": frames.last().map(|f| f.tip_m),
+                "out": out,
+            });
+            if json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                println!("{} frames -> {}", frames.len(), out.display());
+            }
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,166 @@
+//! Training the engine with the shared loop of `ocm-learn` (loss eq 6.17).
+
+use ocm_learn::burn::tensor::{Device, Tensor, TensorData};
+use ocm_learn::gcn::Graph;
+use ocm_learn::{EpochRecord, Split, TrainConfig, cpu_autodiff, train_split};
+use serde::{Deserialize, Serialize};
+
+use crate::data::{Prepared, SetupSplit};
+use crate::engine::{Npe, Surface};
+use crate::model::{NpeConfig, NpeNet};
+use crate::{NpeError, Result};
+
+/// How to train.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FitOptions {
+    /// Most passes over the training set.
+    pub epochs: usize,
+    /// Samples per step.
+    pub batch_size: usize,
+    /// Adam step size.
+    pub learning_rate: f64,
+    /// Epochs without a validation improvement before stopping.
+    pub patience: usize,
+    /// Seed of the weights, the split of set-ups and the shuffling.
+    pub seed: u64,
+    /// Seen set-ups held out for the test.
+    pub test_setups: usize,
+    /// Seen set-ups held out for validation.
+    pub val_setups: usize,
+    /// Feed the contact points (false: the ablation without geometry).
+    pub use_geometry: bool,
+    /// Feed the resultant force (false: the FEM point network, geometry and depth only).
+    pub use_force: bool,
+    /// Node state width.
+    pub width: usize,
+    /// GCN layers.
+    pub layers: usize,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        FitOptions {
+            epochs: 40,
+            batch_size: 8,
+            learning_rate: 2e-3,
+            patience: 10,
+            seed: 0,
+            test_setups: 8,
+            val_setups: 5,
+            use_geometry: true,
+            use_force: true,
+            width: 32,
+            layers: 6,
+            progress: false,
+        }
+    }
+}
+
+/// The outcome of [`fit`].
+#[derive(Debug)]
+pub struct FitReport {
+    /// The trained engine (best validation epoch).
+    pub npe: Npe,
+    /// Which set-ups went where.
+    pub split: SetupSplit,
+    /// Losses per epoch.
+    pub curve: Vec<EpochRecord>,
+    /// Epoch of the returned weights.
+    pub best_epoch: usize,
+    /// Its validation loss.
+    pub best_loss: f64,
+    /// Training samples.
+    pub train_samples: usize,
+    /// Wall time, s.
+    pub seconds: f64,
+}
+
+/// Mean squared error of the scaled displacement plus `lambda` times that of the scaled nodal
+/// force (eq 6.17), over the samples `batch`.
+pub fn loss(
+    net: &NpeNet,
+    cfg: &NpeConfig,
+    p: &Prepared,
+    batch: &[usize],
+    positions: &Tensor<3>,
+    graph: &ocm_learn::gcn::GraphTensors,
+    device: &Device,
+) -> Tensor<1> {
+    let x = p.inputs(cfg, batch);
+    let (out, _) = net.forward(cfg, &x, positions, graph, device);
+    let n = p.rest_m.len();
+    let b = batch.len();
+    let mut t = Vec::with_capacity(b * n * 6);
+    for &i in batch {
+        t.extend_from_slice(&p.samples[i].target);
+    }
+    let target = Tensor::<3>::from_data(TensorData::new(t, [b, n, 6]), device).swap_dims(0, 1);
+    let d = out - target;
+    let sq = d.clone() * d;
+    let mu = sq.clone().slice([0..n, 0..b, 0..3]).mean();
+    let mf = sq.slice([0..n, 0..b, 3..6]).mean();
+    mu + mf * cfg.lambda
+}
+
+/// Trains an engine on `p` split by set-up.
+pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
+    let split = SetupSplit::new(p, opts.test_setups, opts.val_setups, opts.seed)?;
+    let idx = Split {
+        train: p.samples_of(&split.train),
+        val: p.samples_of(&split.val),
+    };
+    if idx.train.is_empty() {
+        return Err(NpeError::Data("no training samples".into()));
+    }
+    let mut cfg = NpeConfig::new(Prepared::top_center(&p.rest_m), p.spacing_m);
+    cfg.use_geometry = opts.use_geometry;
+    cfg.use_force = opts.use_force;
+    cfg.width = opts.width;
+    cfg.layers = opts.layers;
+    let surface = Surface {
+        rest_m: p.rest_m.clone(),
+        edges: p.edges.clone(),
+    };
+    let ad = cpu_autodiff();
+    let plain = ad.clone().inner();
+    let graph = Graph::from_edges(p.rest_m.len(), &p.edges)?;
+    let pos: Vec<f32> = p.rest_m.iter().flat_map(|q| cfg.scales.point(q)).collect();
+    let n = p.rest_m.len();
+    let pos_ad = Tensor::<3>::from_data(TensorData::new(pos.clone(), [n, 1, 3]), &ad);
+    let pos_plain = Tensor::<3>::from_data(TensorData::new(pos, [n, 1, 3]), &plain);
+    let (g_ad, g_plain) = (graph.tensors(&ad), graph.tensors(&plain));
+    let net = cfg.init(&ad, opts.seed)?;
+    let t0 = std::time::Instant::now();
+    let report = train_split(
+        net,
+        &idx,
+        &TrainConfig {
+            epochs: opts.epochs,
+            batch_size: opts.batch_size,
+            learning_rate: opts.learning_rate,
+            val_fraction: 0.0,
+            patience: opts.patience,
+            grad_clip_norm: Some(10.0),
+            seed: opts.seed,
+            progress: opts.progress,
+        },
+        |m, batch, device| {
+            if device.is_autodiff() {
+                loss(m, &cfg, p, batch, &pos_ad, &g_ad, device)
+            } else {
+                loss(m, &cfg, p, batch, &pos_plain, &g_plain, device)
+            }
+        },
+    )?;
+    Ok(FitReport {
+        npe: Npe::new(report.model, cfg, surface)?,
+        split,
+        curve: report.curve,
+        best_epoch: report.best_epoch,
+        best_loss: report.best_loss,
+        train_samples: idx.train.len(),
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}

@@ -1,0 +1,234 @@
+//! The geometry-aware network (dissertation eq 6.10-6.15): DeepSets over the contact points,
+//! fusion with force and depth, node states `[h_global || position]` on the top-surface
+//! graph, residual mean-aggregation GCN layers and a shared readout of nodal displacement and
+//! force.
+
+use ocm_learn::burn;
+use ocm_learn::burn::module::Module;
+use ocm_learn::burn::tensor::{Device, Tensor, TensorData};
+use ocm_learn::deepsets::{DeepSets, DeepSetsConfig};
+use ocm_learn::gcn::{Gcn, GcnConfig, GraphTensors};
+use ocm_learn::{Mlp, MlpConfig};
+use serde::{Deserialize, Serialize};
+
+use crate::{NpeError, Result};
+
+/// Architecture name stored in checkpoints.
+pub const ARCHITECTURE: &str = "npe/ga-gnn";
+
+/// Where the sensor is and the fixed scales that bring inputs and targets to order one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Scales {
+    /// Centre of the top face (x, y) and its highest point (z), m: the origin of the scaled
+    /// coordinates.
+    pub center_m: [f64; 3],
+    /// Length that scales x and y, m.
+    pub xy_m: f64,
+    /// Length that scales z (heights relative to the top), m.
+    pub z_m: f64,
+    /// Force that scales the resultant force input, N.
+    pub force_n: f64,
+    /// Depth that scales the depth input, m.
+    pub depth_m: f64,
+    /// Displacement unit of the targets, m.
+    pub displacement_m: f64,
+    /// Nodal force unit of the targets, N.
+    pub nodal_force_n: f64,
+}
+
+impl Scales {
+    /// Scaled coordinates of a sensor-frame point.
+    pub fn point(&self, p: &[f64; 3]) -> [f32; 3] {
+        [
+            ((p[0] - self.center_m[0]) / self.xy_m) as f32,
+            ((p[1] - self.center_m[1]) / self.xy_m) as f32,
+            ((p[2] - self.center_m[2]) / self.z_m) as f32,
+        ]
+    }
+}
+
+/// Widths, depth and inputs of the network, the scales and the loss weight.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NpeConfig {
+    /// Hidden width of the point network phi.
+    pub point_hidden: usize,
+    /// Features per point after phi (d_h).
+    pub point_features: usize,
+    /// Geometric embedding width (d_g).
+    pub geometry_features: usize,
+    /// Hidden width of the fusion MLP.
+    pub fusion_hidden: usize,
+    /// Node state width: h_global takes `width - 4`, the rest position 3 and the node's own
+    /// penetration by the contact points 1.
+    pub width: usize,
+    /// Number of GCN layers (L).
+    pub layers: usize,
+    /// Hidden width of the readout MLP.
+    pub readout_hidden: usize,
+    /// Whether the contact points reach the network (false: the ablation without geometry).
+    pub use_geometry: bool,
+    /// Whether the resultant force reaches the network (false: the FEM point network of
+    /// Ch.6.6.1, geometry and depth only).
+    pub use_force: bool,
+    /// Factor on the DeepSets sum: the grid cell area in units of 10 mm^2, so the sum is an
+    /// integral over the contact region.
+    pub set_scale: f64,
+    /// Input and target scales.
+    pub scales: Scales,
+    /// Weight of the nodal force term in the loss (eq 6.17), on the scaled targets.
+    pub lambda: f64,
+}
+
+impl NpeConfig {
+    /// The default network for contact points on a grid of `spacing_m` over a top face
+    /// centred at `center_m`.
+    pub fn new(center_m: [f64; 3], spacing_m: f64) -> Self {
+        NpeConfig {
+            point_hidden: 64,
+            point_features: 64,
+            geometry_features: 64,
+            fusion_hidden: 64,
+            width: 32,
+            layers: 6,
+            readout_hidden: 64,
+            use_geometry: true,
+            use_force: true,
+            set_scale: spacing_m * spacing_m * 1e6 / 10.0,
+            scales: Scales {
+                center_m,
+                xy_m: 5e-3,
+                z_m: 0.5e-3,
+                force_n: 2.0,
+                depth_m: 0.5e-3,
+                displacement_m: 1e-4,
+                nodal_force_n: 0.01,
+            },
+            lambda: 1.0,
+        }
+    }
+
+    /// Width of h_global.
+    pub fn global_width(&self) -> usize {
+        self.width - 4
+    }
+
+    /// Builds the network with weights drawn from `seed`.
+    pub fn init(&self, device: &Device, seed: u64) -> Result<NpeNet> {
+        if self.width < 5 || self.layers == 0 {
+            return Err(NpeError::Input(format!(
+                "NPE width {} must exceed 4 and layers {} be positive",
+                self.width, self.layers
+            )));
+        }
+        let encoder = DeepSetsConfig {
+            phi: MlpConfig::relu(3, &[self.point_hidden], self.point_features),
+            rho: MlpConfig::relu(
+                self.point_features,
+                &[self.point_hidden],
+                self.geometry_features,
+            ),
+            scale: self.set_scale,
+        }
+        .init(device, seed)?;
+        Ok(NpeNet {
+            encoder,
+            fusion: MlpConfig::relu(
+                self.geometry_features + 2,
+                &[self.fusion_hidden],
+                self.global_width(),
+            )
+            .init(device, seed.wrapping_add(10)),
+            gcn: GcnConfig {
+                width: self.width,
+                layers: self.layers,
+            }
+            .init(device, seed.wrapping_add(20)),
+            readout: MlpConfig::relu(self.width, &[self.readout_hidden], 6)
+                .init(device, seed.wrapping_add(30)),
+        })
+    }
+}
+
+/// Inputs of a batch, already scaled.
+#[derive(Debug, Clone, Default)]
+pub struct Inputs {
+    /// Contact points of every sample, sample after sample, scaled (3 per point).
+    pub points: Vec<f32>,
+    /// Points per sample.
+    pub counts: Vec<usize>,
+    /// Scaled (force, depth) per sample.
+    pub scalars: Vec<f32>,
+    /// Scaled penetration of each node by the contact points nearest to it, sample after
+    /// sample (`nodes` per sample; 0 where no point is nearest).
+    pub node_depth: Vec<f32>,
+}
+
+/// The network.
+#[derive(Module, Debug)]
+pub struct NpeNet {
+    encoder: DeepSets,
+    fusion: Mlp,
+    gcn: Gcn,
+    readout: Mlp,
+}
+
+impl NpeNet {
+    /// The global context h_global, `[batch, width - 3]`.
+    pub fn global(&self, cfg: &NpeConfig, x: &Inputs, device: &Device) -> Tensor<2> {
+        let b = x.counts.len();
+        let total: usize = x.counts.iter().sum();
+        let g = if cfg.use_geometry {
+            let pts = (total > 0).then(|| {
+                Tensor::<2>::from_data(TensorData::new(x.points.clone(), [total, 3]), device)
+            });
+            self.encoder.forward(pts, &x.counts, device)
+        } else {
+            Tensor::<2>::zeros([b, cfg.geometry_features], device)
+        };
+        let mut s = x.scalars.clone();
+        if !cfg.use_force {
+            for k in 0..b {
+                s[2 * k] = 0.0;
+            }
+        }
+        let s = Tensor::<2>::from_data(TensorData::new(s, [b, 2]), device);
+        self.fusion.forward(Tensor::cat(vec![g, s], 1))
+    }
+
+    fn node_depth(&self, cfg: &NpeConfig, x: &Inputs, n: usize, device: &Device) -> Tensor<3> {
+        let b = x.counts.len();
+        if !cfg.use_geometry || x.node_depth.len() != b * n {
+            return Tensor::<3>::zeros([n, b, 1], device);
+        }
+        Tensor::<3>::from_data(TensorData::new(x.node_depth.clone(), [b, n, 1]), device)
+            .swap_dims(0, 1)
+    }
+
+    /// Scaled nodal (displacement, force), `[nodes, batch, 6]`, and h_global.
+    /// `positions` is the scaled rest position of every node, `[nodes, 1, 3]`; the node
+    /// states start as `[h_global || position || own penetration]`.
+    pub fn forward(
+        &self,
+        cfg: &NpeConfig,
+        x: &Inputs,
+        positions: &Tensor<3>,
+        graph: &GraphTensors,
+        device: &Device,
+    ) -> (Tensor<3>, Tensor<2>) {
+        let b = x.counts.len();
+        let n = positions.dims()[0];
+        let hg = self.global(cfg, x, device);
+        let h0 = Tensor::cat(
+            vec![
+                hg.clone()
+                    .reshape([1, b, cfg.global_width()])
+                    .repeat_dim(0, n),
+                positions.clone().repeat_dim(1, b),
+                self.node_depth(cfg, x, n, device),
+            ],
+            2,
+        );
+        let h = self.gcn.forward(h0, graph);
+        (self.readout.forward(h), hg)
+    }
+}

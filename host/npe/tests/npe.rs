@@ -1,0 +1,210 @@
+//! The engine's contract: order of the contact points, bad inputs, a checkpoint round trip,
+//! seeded determinism, and accuracy against the FEM on held-out indentations.
+
+use ocm_learn::cpu;
+use ocm_npe::data::{Prepared, Sample};
+use ocm_npe::fit::{FitOptions, fit};
+use ocm_npe::model::NpeConfig;
+use ocm_npe::{Npe, NpeError, Surface};
+
+/// A 7 x 6 grid of nodes 1 mm apart at z = 2 mm, triangulated.
+fn surface() -> Surface {
+    let (nx, ny) = (7, 6);
+    let id = |i: usize, j: usize| j * nx + i;
+    let mut rest_m = Vec::new();
+    for j in 0..ny {
+        for i in 0..nx {
+            rest_m.push([i as f64 * 1e-3, j as f64 * 1e-3, 2e-3]);
+        }
+    }
+    let mut edges = Vec::new();
+    for j in 0..ny {
+        for i in 0..nx {
+            if i + 1 < nx {
+                edges.push([id(i, j), id(i + 1, j)]);
+            }
+            if j + 1 < ny {
+                edges.push([id(i, j), id(i, j + 1)]);
+            }
+            if i + 1 < nx && j + 1 < ny {
+                edges.push([id(i, j), id(i + 1, j + 1)]);
+            }
+        }
+    }
+    Surface { rest_m, edges }
+}
+
+fn engine(seed: u64) -> Npe {
+    let s = surface();
+    let mut cfg = NpeConfig::new(Prepared::top_center(&s.rest_m), 0.25e-3);
+    cfg.layers = 2;
+    cfg.width = 12;
+    let net = cfg.init(&cpu(), seed).unwrap();
+    Npe::new(net, cfg, s).unwrap()
+}
+
+/// A small cap of contact points around (cx, cy), `depth_m` deep.
+fn cap(cx: f64, cy: f64, depth_m: f64) -> Vec<[f64; 3]> {
+    let mut p = Vec::new();
+    for a in -4i32..=4 {
+        for b in -4i32..=4 {
+            let (x, y) = (cx + a as f64 * 0.25e-3, cy + b as f64 * 0.25e-3);
+            let r2 = (x - cx).powi(2) + (y - cy).powi(2);
+            let z = 2e-3 - depth_m + r2 / (2.0 * 2e-3);
+            if z < 2e-3 {
+                p.push([x, y, z]);
+            }
+        }
+    }
+    p
+}
+
+#[test]
+fn order_of_contact_points_does_not_matter() {
+    let npe = engine(3);
+    let pts = cap(3e-3, 2.5e-3, 0.3e-3);
+    assert!(pts.len() > 10);
+    let a = npe.predict(&pts, 1.2, 0.3e-3).unwrap();
+    let mut shuffled = pts.clone();
+    shuffled.reverse();
+    shuffled.rotate_left(5);
+    let b = npe.predict(&shuffled, 1.2, 0.3e-3).unwrap();
+    let mut worst: f64 = 0.0;
+    for (u, v) in a.displacement_m.iter().zip(&b.displacement_m) {
+        for k in 0..3 {
+            worst = worst.max((u[k] - v[k]).abs());
+        }
+    }
+    // f32 sums in another order: round-off only.
+    assert!(worst < 1e-9, "largest difference {worst} m");
+    assert_eq!(
+        npe.latent(&pts, 1.2, 0.3e-3).unwrap().len(),
+        npe.config.width - 4
+    );
+    // The field depends on where the contact is (not a constant network).
+    let c = npe.predict(&cap(1e-3, 1e-3, 0.3e-3), 1.2, 0.3e-3).unwrap();
+    assert_ne!(a.displacement_m, c.displacement_m);
+}
+
+#[test]
+fn bad_and_empty_inputs_get_defined_answers() {
+    let npe = engine(1);
+    let n = npe.surface.rest_m.len();
+    // No contact points: the gel is untouched.
+    let z = npe.predict(&[], 0.0, 0.0).unwrap();
+    assert_eq!(z.displacement_m, vec![[0.0; 3]; n]);
+    assert_eq!(z.nodal_force_n, vec![[0.0; 3]; n]);
+    assert_eq!(
+        npe.latent(&[], 0.0, 0.0).unwrap(),
+        vec![0.0; npe.config.width - 4]
+    );
+    // Points off the face or above it are dropped and counted; alone they mean no contact.
+    let off = [[50e-3, 1e-3, 1.9e-3], [1e-3, 1e-3, 2.5e-3]];
+    let r = npe.predict(&off, 0.5, 0.1e-3).unwrap();
+    assert_eq!(r.ignored_points, 2);
+    assert_eq!(r.displacement_m, vec![[0.0; 3]; n]);
+    let mut mixed = cap(3e-3, 2.5e-3, 0.2e-3);
+    let kept = npe.predict(&mixed, 0.5, 0.2e-3).unwrap();
+    mixed.extend(off);
+    let with_off = npe.predict(&mixed, 0.5, 0.2e-3).unwrap();
+    assert_eq!(with_off.ignored_points, 2);
+    assert_eq!(with_off.displacement_m, kept.displacement_m);
+    // NaN anywhere, negative force or depth, a point through the gel: errors naming it.
+    let mut nan = cap(3e-3, 2.5e-3, 0.2e-3);
+    nan[4][1] = f64::NAN;
+    let e = npe.predict(&nan, 0.5, 0.2e-3).unwrap_err();
+    assert!(
+        matches!(e, NpeError::Input(_)) && e.to_string().contains("point 4"),
+        "{e}"
+    );
+    let e = npe.predict(&kept_points(), f64::NAN, 0.2e-3).unwrap_err();
+    assert!(e.to_string().contains("force"), "{e}");
+    let e = npe.predict(&kept_points(), -1.0, 0.2e-3).unwrap_err();
+    assert!(e.to_string().contains("force"), "{e}");
+    let e = npe.predict(&kept_points(), 1.0, f64::INFINITY).unwrap_err();
+    assert!(e.to_string().contains("depth"), "{e}");
+    let e = npe.latent(&[[3e-3, 2e-3, -5e-3]], 1.0, 0.1e-3).unwrap_err();
+    assert!(e.to_string().contains("below the top face"), "{e}");
+}
+
+fn kept_points() -> Vec<[f64; 3]> {
+    cap(3e-3, 2.5e-3, 0.2e-3)
+}
+
+/// Synthetic indentations on the grid surface: a smooth dent under the contact's centroid
+/// whose depth and width follow the inputs, with nodal forces proportional to the dent.
+fn synthetic() -> Prepared {
+    let s = surface();
+    let scales = NpeConfig::new(Prepared::top_center(&s.rest_m), 0.25e-3).scales;
+    let mut samples = Vec::new();
+    for (k, (cx, cy)) in [(2e-3, 2e-3), (4e-3, 3e-3), (3e-3, 1.5e-3), (5e-3, 2.5e-3)]
+        .into_iter()
+        .enumerate()
+    {
+        for step in 1..=6 {
+            let d = step as f64 * 0.1e-3;
+            let mut target = Vec::new();
+            for p in &s.rest_m {
+                let r2 = (p[0] - cx).powi(2) + (p[1] - cy).powi(2);
+                let uz = -d * (-r2 / 2e-6).exp();
+                target.extend([0.0, 0.0, (uz / scales.displacement_m) as f32]);
+                target.extend([0.0, 0.0, (uz * 200.0 / scales.nodal_force_n) as f32]);
+            }
+            samples.push(Sample {
+                setup: k,
+                depth_m: d,
+                force_n: [0.0, 0.0, 4000.0 * d],
+                points_m: cap(cx, cy, d),
+                target,
+            });
+        }
+    }
+    Prepared {
+        setup_names: (0..4).map(|k| format!("s{k}")).collect(),
+        setup_unseen: vec![false; 4],
+        samples,
+        without_points: 0,
+        locator: ocm_npe::data::NodeLocator::new(&s.rest_m),
+        rest_m: s.rest_m,
+        edges: s.edges,
+        spacing_m: 0.25e-3,
+    }
+}
+
+fn small_fit(seed: u64) -> FitOptions {
+    FitOptions {
+        epochs: 3,
+        batch_size: 4,
+        seed,
+        test_setups: 1,
+        val_setups: 1,
+        width: 12,
+        layers: 2,
+        ..FitOptions::default()
+    }
+}
+
+#[test]
+fn same_seed_same_engine_and_checkpoint_round_trip() {
+    let p = synthetic();
+    let a = fit(&p, &small_fit(5)).unwrap();
+    let b = fit(&p, &small_fit(5)).unwrap();
+    let c = fit(&p, &small_fit(6)).unwrap();
+    let s = &p.samples[0];
+    let run = |n: &Npe| n.predict(&s.points_m, s.force_n[2], s.depth_m).unwrap();
+    assert_eq!(a.curve.len(), b.curve.len());
+    for (x, y) in a.curve.iter().zip(&b.curve) {
+        assert_eq!(x.train_loss, y.train_loss);
+        assert_eq!(x.val_loss.to_bits(), y.val_loss.to_bits());
+    }
+    assert_eq!(run(&a.npe), run(&b.npe));
+    assert_ne!(run(&a.npe), run(&c.npe));
+    let path = std::env::temp_dir().join(format!("ocm-npe-{}.ckpt", std::process::id()));
+    a.npe
+        .save(&path, serde_json::json!({"split": a.split}))
+        .unwrap();
+    let back = Npe::load(&path).unwrap();
+    assert_eq!(run(&a.npe), run(&back));
+    assert_eq!(back.surface, a.npe.surface);
+    std::fs::remove_file(&path).ok();
+}

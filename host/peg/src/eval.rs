@@ -1,0 +1,169 @@
+//! Evaluation of policies on randomised trials, all trials stepped in lockstep so that the
+//! policy runs once per control step on the whole batch.
+
+use serde::{Deserialize, Serialize};
+
+use crate::bc::BcPolicy;
+use crate::encoder::TactileEncoder;
+use crate::error::Result;
+use crate::expert::ExpertConfig;
+use crate::rollout::{Outcome, observe, run_trial};
+use crate::scene::{PegScene, SceneConfig};
+use crate::trial::Randomisation;
+
+/// Outcomes of one controller on a set of trials.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Evaluation {
+    /// Controller name.
+    pub controller: String,
+    /// One outcome per trial.
+    pub outcomes: Vec<Outcome>,
+    /// Tip path of each trial: rows `[time_s, x_m, y_m, z_m]`.
+    pub tip_paths: Vec<Vec<[f64; 4]>>,
+}
+
+impl Evaluation {
+    /// Fraction of successful trials.
+    pub fn success_rate(&self) -> f64 {
+        let n = self.outcomes.len().max(1) as f64;
+        self.outcomes.iter().filter(|o| o.success).count() as f64 / n
+    }
+
+    /// Median time to success over the successful trials, s (NaN without any).
+    pub fn median_success_time_s(&self) -> f64 {
+        let mut t: Vec<f64> = self
+            .outcomes
+            .iter()
+            .filter(|o| o.success)
+            .map(|o| o.time_s)
+            .collect();
+        if t.is_empty() {
+            return f64::NAN;
+        }
+        t.sort_by(f64::total_cmp);
+        let m = t.len() / 2;
+        if t.len() % 2 == 1 {
+            t[m]
+        } else {
+            0.5 * (t[m - 1] + t[m])
+        }
+    }
+}
+
+/// The trials to evaluate on: trials `0..trials` of stream `seed` of a randomisation.
+#[derive(Debug, Clone, Copy)]
+pub struct TrialSpec<'a> {
+    /// The scene.
+    pub scene: &'a SceneConfig,
+    /// The randomisation.
+    pub randomisation: &'a Randomisation,
+    /// Seed of the trial stream.
+    pub seed: u64,
+    /// Number of trials.
+    pub trials: usize,
+}
+
+fn tip_row(scene: &PegScene) -> [f64; 4] {
+    let (p, _) = scene.peg_tip();
+    [scene.time_s(), p[0], p[1], p[2]]
+}
+
+/// Runs `policy` on the trials of `spec`; `progress(control_step)` is called once per control
+/// step of the batch.
+pub fn evaluate_policy(
+    name: &str,
+    policy: &BcPolicy,
+    spec: TrialSpec<'_>,
+    encoder: &dyn TactileEncoder,
+    progress: &mut dyn FnMut(usize),
+) -> Result<Evaluation> {
+    let TrialSpec {
+        scene: config,
+        randomisation,
+        seed,
+        trials,
+    } = spec;
+    randomisation.validate()?;
+    let specs: Vec<_> = (0..trials as u64)
+        .map(|i| randomisation.trial(config, seed, i))
+        .collect();
+    let mut scenes = specs
+        .iter()
+        .map(|t| PegScene::new(config, t.start, t.error))
+        .collect::<Result<Vec<_>>>()?;
+    let mut paths: Vec<Vec<[f64; 4]>> = scenes.iter().map(|s| vec![tip_row(s)]).collect();
+    let limit = config.max_control_steps();
+    for step in 0..limit {
+        let active: Vec<usize> = (0..scenes.len())
+            .filter(|&i| !scenes[i].inserted())
+            .collect();
+        if active.is_empty() {
+            break;
+        }
+        let obs = active
+            .iter()
+            .map(|&i| observe(&scenes[i], encoder))
+            .collect::<Result<Vec<_>>>()?;
+        let actions = policy.act_batch(&obs)?;
+        for (&i, a) in active.iter().zip(actions) {
+            scenes[i].step(a)?;
+            paths[i].push(tip_row(&scenes[i]));
+        }
+        progress(step + 1);
+    }
+    let outcomes = specs
+        .iter()
+        .zip(&scenes)
+        .map(|(t, s)| Outcome {
+            trial: *t,
+            success: s.inserted(),
+            time_s: s.time_s(),
+            tip_m: s.peg_tip().0,
+        })
+        .collect();
+    Ok(Evaluation {
+        controller: name.to_string(),
+        outcomes,
+        tip_paths: paths,
+    })
+}
+
+/// Runs the privileged expert (no noise) on the same trials, as the reference.
+pub fn evaluate_expert(
+    expert: &ExpertConfig,
+    spec: TrialSpec<'_>,
+    encoder: &dyn TactileEncoder,
+) -> Result<Evaluation> {
+    let TrialSpec {
+        scene: config,
+        randomisation,
+        seed,
+        trials,
+    } = spec;
+    expert.validate()?;
+    randomisation.validate()?;
+    let mut outcomes = Vec::with_capacity(trials);
+    let mut tip_paths = Vec::with_capacity(trials);
+    for i in 0..trials as u64 {
+        let t = randomisation.trial(config, seed, i);
+        let mut tips = Vec::new();
+        let (o, _, _) = run_trial(
+            config,
+            &t,
+            encoder,
+            &mut |scene, _| {
+                tips.push(tip_row(scene));
+                Ok(expert.act(scene))
+            },
+            &mut || [0.0; 4],
+        )?;
+        tips.push([o.time_s, o.tip_m[0], o.tip_m[1], o.tip_m[2]]);
+        outcomes.push(o);
+        tip_paths.push(tips);
+    }
+    Ok(Evaluation {
+        controller: "expert".into(),
+        outcomes,
+        tip_paths,
+    })
+}

@@ -1,0 +1,26 @@
+//! Peg-in-hole with two DIGIT pads (dissertation Ch.6.6.2-6.6.4): a rigid-body scene on rapier,
+//! contact points in each sensor's frame, tactile encoders, a scripted expert, demonstrations,
+//! behaviour cloning (eq 6.18-6.19), evaluation and trajectory replay.
+
+pub mod bc;
+pub mod contact;
+pub mod demos;
+pub mod encoder;
+pub mod error;
+pub mod eval;
+pub mod expert;
+pub mod patch;
+pub mod replay;
+pub mod rollout;
+pub mod scene;
+pub mod trial;
+
+pub use bc::{BcConfig, BcPolicy, BcTraining, train_bc};
+pub use contact::{GelFoundation, SensorContact, SensorFrame, pad_contact};
+pub use demos::{ActionNoise, DemoSet, DemoSettings};
+pub use encoder::{ContactFeatures, TactileEncoder};
+pub use error::{PegError, Result};
+pub use eval::{Evaluation, TrialSpec, evaluate_expert, evaluate_policy};
+pub use expert::ExpertConfig;
+pub use scene::{GripperPose, InHandError, PegScene, SceneConfig};
+pub use trial::{Randomisation, Trial};

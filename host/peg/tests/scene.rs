@@ -1,0 +1,172 @@
+//! The scene: contact extraction against the closed-form patch of a flat face pressed into a
+//! pad, the expert, determinism, bad inputs.
+
+use ocm_peg::encoder::CONTACT_FEATURES;
+use ocm_peg::{
+    ContactFeatures, ExpertConfig, GripperPose, InHandError, PegScene, Randomisation, SceneConfig,
+    TactileEncoder,
+};
+
+fn high() -> GripperPose {
+    GripperPose {
+        z_m: 0.1,
+        ..Default::default()
+    }
+}
+
+/// A flat peg face pressed `squeeze` into each pad: every point is `squeeze` deep, the patch is
+/// the face's strip (side = across flats / sqrt 3) from the pads' lower edge to the peg's top,
+/// shifted by the in-hand offset (mirrored on the left sensor, whose x is -y of the gripper),
+/// and the foundation force is E/h x area x squeeze.
+#[test]
+fn contact_points_match_a_flat_face_pressed_into_the_pad() {
+    let c = SceneConfig::default();
+    let e = InHandError {
+        offset_y_m: 0.001,
+        offset_z_m: 0.002,
+        tilt_rad: 0.0,
+    };
+    let scene = PegScene::new(&c, high(), e).unwrap();
+    let side = c.peg_across_flats_m / 3f64.sqrt();
+    let top = c.peg_top_m + e.offset_z_m;
+    let bottom = -0.5 * c.pad_height_m;
+    let contacts = scene.contacts().unwrap();
+    for (i, sc) in contacts.iter().enumerate() {
+        let shift = if i == 0 { -e.offset_y_m } else { e.offset_y_m };
+        assert!(sc.points_m.len() >= 4, "sensor {i}: {:?}", sc.points_m);
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        for p in &sc.points_m {
+            assert!(
+                (p[2] - c.squeeze_m).abs() < 5e-6,
+                "sensor {i} depth {}",
+                p[2]
+            );
+            x0 = x0.min(p[0]);
+            x1 = x1.max(p[0]);
+            y0 = y0.min(p[1]);
+            y1 = y1.max(p[1]);
+        }
+        let tol = 5e-6;
+        assert!(
+            (x0 - (shift - 0.5 * side)).abs() < tol,
+            "sensor {i} x0 {x0}"
+        );
+        assert!(
+            (x1 - (shift + 0.5 * side)).abs() < tol,
+            "sensor {i} x1 {x1}"
+        );
+        assert!((y0 - bottom).abs() < tol, "sensor {i} y0 {y0}");
+        assert!((y1 - top).abs() < tol, "sensor {i} y1 {y1}");
+        let area = side * (top - bottom);
+        let f = c.gel_modulus_pa / c.gel_thickness_m * area * c.squeeze_m;
+        assert!(
+            (sc.force_n - f).abs() < 0.02 * f,
+            "sensor {i}: {} N vs {f} N",
+            sc.force_n
+        );
+        let z = ContactFeatures.latent(&sc.points_m, sc.force_n).unwrap();
+        assert_eq!(z.len(), CONTACT_FEATURES);
+        assert!((f64::from(z[2]) - shift * 1e3).abs() < 0.01);
+        assert!((f64::from(z[3]) - 0.5 * (top + bottom) * 1e3).abs() < 0.01);
+    }
+}
+
+/// A tilt of the peg in the pads' plane turns the patch's major axis by the same angle (the
+/// strip is long and thin; its clipped ends shift the axis by well under a degree here).
+#[test]
+fn a_tilted_peg_turns_the_patch_axis() {
+    let c = SceneConfig::default();
+    let t = 4f64.to_radians();
+    let scene = PegScene::new(
+        &c,
+        high(),
+        InHandError {
+            tilt_rad: t,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let contacts = scene.contacts().unwrap();
+    for (i, sc) in contacts.iter().enumerate() {
+        let z = ContactFeatures.latent(&sc.points_m, sc.force_n).unwrap();
+        let axis = 0.5 * f64::from(z[8]).atan2(f64::from(z[7]));
+        // The tilt turns the peg's axis (0, -sin t, cos t) in the gripper; the right sensor's x
+        // is the gripper's y, the left's is -y (mirrored).
+        let half_pi = 0.5 * std::f64::consts::PI;
+        let expected = if i == 0 { half_pi - t } else { half_pi + t };
+        let d = (axis - expected).rem_euclid(std::f64::consts::PI);
+        let d = d.min(std::f64::consts::PI - d);
+        assert!(
+            d < 1f64.to_radians(),
+            "sensor {i}: axis {axis} expected {expected}"
+        );
+    }
+}
+
+#[test]
+fn the_expert_inserts_and_the_same_seed_gives_the_same_run() {
+    let c = SceneConfig::default();
+    let r = Randomisation::default();
+    let ex = ExpertConfig::default();
+    let run = || {
+        ocm_peg::evaluate_expert(
+            &ex,
+            ocm_peg::TrialSpec {
+                scene: &c,
+                randomisation: &r,
+                seed: 7,
+                trials: 3,
+            },
+            &ContactFeatures,
+        )
+        .unwrap()
+    };
+    let a = run();
+    let b = run();
+    assert_eq!(a, b);
+    assert_eq!(a.success_rate(), 1.0, "{:?}", a.outcomes);
+}
+
+#[test]
+fn bad_inputs_are_errors_naming_the_value() {
+    let c = SceneConfig::default();
+    let e = PegScene::new(
+        &c,
+        GripperPose {
+            x_m: f64::NAN,
+            ..high()
+        },
+        InHandError::default(),
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(e.contains("start x_m"), "{e}");
+    let e = PegScene::new(
+        &c,
+        high(),
+        InHandError {
+            offset_y_m: 0.01,
+            ..Default::default()
+        },
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(e.contains("off the pads"), "{e}");
+    let mut scene = PegScene::new(&c, high(), InHandError::default()).unwrap();
+    let e = scene
+        .step([0.0, f64::INFINITY, 0.0, 0.0])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("action[1]"), "{e}");
+    let bad = SceneConfig {
+        clearance_m: -1.0,
+        ..SceneConfig::default()
+    };
+    let e = PegScene::new(&bad, high(), InHandError::default())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("clearance_m"), "{e}");
+}

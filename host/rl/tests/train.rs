@@ -1,0 +1,152 @@
+//! Training: behaviour cloning beats a random policy, training and collection are seeded and
+//! deterministic, checkpoints round-trip.
+
+mod common;
+use common::robot;
+use ocm_learn::TrainConfig;
+use ocm_rl::bc;
+use ocm_rl::env::{Env, EnvConfig};
+use ocm_rl::eval::evaluate;
+use ocm_rl::policy::{Policy, PolicyMeta};
+use ocm_rl::ppo::{self, PpoConfig};
+use ocm_rl::sac::{self, SacConfig};
+use ocm_rl::tasks::TaskKind;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn quick_train() -> TrainConfig {
+    TrainConfig {
+        epochs: 80,
+        batch_size: 128,
+        learning_rate: 3e-3,
+        val_fraction: 0.0,
+        patience: 0,
+        grad_clip_norm: None,
+        seed: 0,
+        progress: false,
+    }
+}
+
+/// Margin of the short-training test: BC's mean circle error must be below this fraction of a
+/// uniformly random policy's.
+const MARGIN: f64 = 0.25;
+
+#[test]
+fn short_behaviour_cloning_beats_a_random_policy_on_the_circle() {
+    let r = robot();
+    let cfg = EnvConfig::new(TaskKind::Circle);
+    let demos = bc::collect(&r, &cfg, 12, 0.03, 0, 2).unwrap();
+    assert_eq!(demos.len(), 1200);
+    let (policy, curve) = bc::fit(&demos, &[64, 64], &quick_train(), 0).unwrap();
+    assert!(curve.last().unwrap().train_loss < 0.2 * curve[0].train_loss);
+    let mut env = Env::new(r.clone(), cfg).unwrap();
+    let trained = evaluate(&mut env, 3, 500, |_, o| policy.act(o)).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let random = evaluate(&mut env, 3, 500, |_, _| {
+        Ok(std::array::from_fn(|_| rng.random_range(-1.0..1.0)))
+    })
+    .unwrap();
+    eprintln!(
+        "BC {:.2} mm, random {:.2} mm",
+        trained.position_error_mm.mean, random.position_error_mm.mean
+    );
+    assert!(
+        trained.position_error_mm.mean < MARGIN * random.position_error_mm.mean,
+        "BC {} mm vs random {} mm",
+        trained.position_error_mm.mean,
+        random.position_error_mm.mean
+    );
+    assert!(trained.episode_return.mean > random.episode_return.mean);
+}
+
+#[test]
+fn collection_and_fitting_are_deterministic() {
+    let r = robot();
+    let cfg = EnvConfig::new(TaskKind::Weight);
+    let a = bc::collect(&r, &cfg, 3, 0.05, 7, 1).unwrap();
+    let b = bc::collect(&r, &cfg, 3, 0.05, 7, 2).unwrap();
+    assert_eq!(a, b);
+    let mut t = quick_train();
+    t.epochs = 3;
+    let (p1, c1) = bc::fit(&a, &[16], &t, 3).unwrap();
+    let (p2, c2) = bc::fit(&a, &[16], &t, 3).unwrap();
+    assert_eq!(
+        c1.iter().map(|r| r.train_loss).collect::<Vec<_>>(),
+        c2.iter().map(|r| r.train_loss).collect::<Vec<_>>()
+    );
+    let obs: Vec<f64> = a.obs[..400].iter().map(|&v| f64::from(v)).collect();
+    assert_eq!(p1.act_batch(&obs).unwrap(), p2.act_batch(&obs).unwrap());
+}
+
+#[test]
+fn ppo_is_seeded_and_its_best_policy_round_trips() {
+    let r = robot();
+    let cfg = EnvConfig::new(TaskKind::Circle);
+    let ppo_cfg = PpoConfig {
+        iterations: 2,
+        envs: 2,
+        horizon: 16,
+        epochs: 2,
+        minibatch: 16,
+        hidden: vec![16],
+        eval_every: 1,
+        eval_episodes: 1,
+        ..PpoConfig::default()
+    };
+    let (p1, c1) = ppo::train(&r, &cfg, &ppo_cfg, |_| {}).unwrap();
+    let (_, c2) = ppo::train(&r, &cfg, &ppo_cfg, |_| {}).unwrap();
+    let strip = |c: &[ppo::RlRecord]| {
+        c.iter()
+            .map(|r| (r.mean_reward, r.eval_return, r.eval_position_error_mm))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(strip(&c1), strip(&c2));
+    let dir = std::env::temp_dir().join(format!("ocm-rl-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("policy.ckpt");
+    let meta = PolicyMeta {
+        task: "circle".into(),
+        algorithm: "ppo".into(),
+        seed: 0,
+        score: c1[1].eval_return,
+    };
+    p1.save(&path, &meta).unwrap();
+    let (p3, m3) = Policy::load(&path).unwrap();
+    assert_eq!(m3, meta);
+    let mut env = Env::new(r.clone(), cfg).unwrap();
+    let obs = env.reset(3).unwrap();
+    assert_eq!(p1.act(&obs).unwrap(), p3.act(&obs).unwrap());
+    std::fs::write(&path, b"not a checkpoint").unwrap();
+    assert!(Policy::load(&path).is_err());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn sac_is_seeded_and_its_policy_acts_in_bounds() {
+    let r = robot();
+    let cfg = EnvConfig::new(TaskKind::Ellipse);
+    let sac_cfg = SacConfig {
+        steps: 24,
+        envs: 2,
+        warmup: 8,
+        batch: 16,
+        hidden: vec![16],
+        eval_every: 12,
+        eval_episodes: 1,
+        ..SacConfig::default()
+    };
+    let (p1, c1) = sac::train(&r, &cfg, &sac_cfg, |_| {}).unwrap();
+    let (p2, c2) = sac::train(&r, &cfg, &sac_cfg, |_| {}).unwrap();
+    assert_eq!(c1.len(), 2);
+    let strip = |c: &[ppo::RlRecord]| {
+        c.iter()
+            .map(|r| (r.mean_reward, r.eval_return, r.eval_force_error_n))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(strip(&c1), strip(&c2));
+    let mut env = Env::new(r.clone(), cfg).unwrap();
+    let obs = env.reset(1).unwrap();
+    let a = p1.act(&obs).unwrap();
+    assert_eq!(a, p2.act(&obs).unwrap());
+    assert!(a.iter().all(|v| v.abs() < 1.0));
+}

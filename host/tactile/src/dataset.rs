@@ -1,0 +1,749 @@
+//! Datasets of indentations for the neural physics engine (dissertation Ch.6.5.1): per set-up
+//! and saved depth, the top-face nodal displacement and contact force from the FEM, the
+//! indenter pose, depth and total force, and the contact points in the sensor frame.
+//!
+//! Contact points are defined without the FEM, so a rigid-body scene can compute them at run
+//! time: over a regular x-y grid on the gel's top face (the [`ContactGrid`]), the lowest point
+//! of the rigid body above each grid point, kept where it lies below the undeformed top face.
+//! The sensor frame is the gel mesh's frame (metres; z up from the base, the top face near
+//! z_top). For a body moving along -z from first touch, the deepest contact point lies below
+//! the undeformed top by the indentation depth (up to the grid's sampling).
+
+use crate::gel::Gel;
+use crate::indent::{IndentOptions, Indentation, StepOutput};
+use crate::indenter::{Indenter, Placed};
+use crate::mask::{Grid, rasterize};
+use crate::output::{StepRow, write_force_depth_csv, write_step};
+use crate::setup::Setup;
+use crate::{Result, TactileError};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// How a dataset is generated.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DatasetOptions {
+    /// Depth steps of the FEM (every step is saved).
+    pub steps: usize,
+    /// Depth increment, m.
+    pub step_m: f64,
+    /// Spacing of the contact-point grid, m.
+    pub grid_spacing_m: f64,
+}
+
+impl Default for DatasetOptions {
+    /// 20 steps of 50 um (to the protocol's 1 mm; a frictionless static solve at a depth does
+    /// not depend on the path, so the 10 um steps of the protocol only cost time), contact
+    /// points every 0.25 mm.
+    fn default() -> Self {
+        DatasetOptions {
+            steps: 20,
+            step_m: 50e-6,
+            grid_spacing_m: 0.25e-3,
+        }
+    }
+}
+
+/// The gel's top face as a graph: its nodes, their rest positions and the triangle edges.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopSurface {
+    /// Mesh node index of each top node (sorted).
+    pub nodes: Vec<usize>,
+    /// Rest position of each top node, m.
+    pub rest_m: Vec<[f64; 3]>,
+    /// Undirected edges of the top triangles, as indices into `nodes` (each once, a < b).
+    pub edges: Vec<[usize; 2]>,
+}
+
+impl TopSurface {
+    /// The top face of `gel` (its upward-facing boundary triangles).
+    pub fn from_gel(gel: &Gel) -> Self {
+        let nodes = gel.top.clone();
+        let mut local = vec![usize::MAX; gel.num_nodes()];
+        for (k, &i) in nodes.iter().enumerate() {
+            local[i] = k;
+        }
+        let mut set = std::collections::BTreeSet::new();
+        for t in &gel.top_triangles {
+            for e in 0..3 {
+                let (a, b) = (local[t[e]], local[t[(e + 1) % 3]]);
+                set.insert([a.min(b), a.max(b)]);
+            }
+        }
+        TopSurface {
+            rest_m: nodes.iter().map(|&i| gel.mesh.points[i]).collect(),
+            nodes,
+            edges: set.into_iter().collect(),
+        }
+    }
+
+    /// The top-node rows of a field over all mesh nodes.
+    pub fn restrict(&self, field: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        self.nodes.iter().map(|&i| field[i]).collect()
+    }
+
+    /// A field over all `num_nodes` mesh nodes from its top-node rows (zero elsewhere).
+    pub fn extend(&self, top: &[[f64; 3]], num_nodes: usize) -> Vec<[f64; 3]> {
+        let mut full = vec![[0.0; 3]; num_nodes];
+        for (&i, v) in self.nodes.iter().zip(top) {
+            full[i] = *v;
+        }
+        full
+    }
+}
+
+/// A regular grid over the top face with the undeformed height of the face at each grid point.
+#[derive(Debug, Clone)]
+pub struct ContactGrid {
+    /// The grid (pixel centres are the sample points).
+    pub grid: Grid,
+    /// Height of the undeformed top face at each grid point, m (row-major).
+    pub height_m: Vec<f64>,
+    /// Whether the grid point lies over the top face.
+    pub inside: Vec<bool>,
+    /// Lowest height of the top face, m.
+    pub z_min_m: f64,
+}
+
+impl ContactGrid {
+    /// The grid over `gel`'s top face with spacing `spacing_m`.
+    pub fn for_gel(gel: &Gel, spacing_m: f64) -> Result<Self> {
+        if !(spacing_m.is_finite() && spacing_m > 0.0) {
+            return Err(TactileError::Input(format!(
+                "contact grid spacing {spacing_m} m must be positive"
+            )));
+        }
+        let (lo, hi) = gel.top_bounds();
+        let grid = Grid {
+            origin_m: lo,
+            pixel_m: spacing_m,
+            cols: ((hi[0] - lo[0]) / spacing_m).round().max(1.0) as usize,
+            rows: ((hi[1] - lo[1]) / spacing_m).round().max(1.0) as usize,
+        };
+        let z: Vec<f64> = gel.mesh.points.iter().map(|p| p[2]).collect();
+        let ones = vec![1.0; gel.num_nodes()];
+        let height_m = rasterize(gel, &grid, &z);
+        let inside: Vec<bool> = rasterize(gel, &grid, &ones)
+            .iter()
+            .map(|&c| c > 0.5)
+            .collect();
+        let z_min_m = gel.top.iter().map(|&i| z[i]).fold(f64::INFINITY, f64::min);
+        Ok(ContactGrid {
+            grid,
+            height_m,
+            inside,
+            z_min_m,
+        })
+    }
+
+    /// Contact points of a rigid body whose lowest surface point above (x, y) is
+    /// `lower(x, y)` (None where the body does not cover the point): the grid points over the
+    /// top face where that surface lies below the undeformed face, at the surface's height.
+    pub fn points_below(&self, lower: impl Fn(f64, f64) -> Option<f64>) -> Vec<[f64; 3]> {
+        let mut out = Vec::new();
+        for r in 0..self.grid.rows {
+            for c in 0..self.grid.cols {
+                let k = r * self.grid.cols + c;
+                if !self.inside[k] {
+                    continue;
+                }
+                let [x, y] = self.grid.center(r, c);
+                if let Some(z) = lower(x, y)
+                    && z < self.height_m[k]
+                {
+                    out.push([x, y, z]);
+                }
+            }
+        }
+        out
+    }
+
+    /// Contact points of a placed indenter (rays cast up from below the gel to its surface).
+    pub fn contact_points(&self, placed: &Placed) -> Vec<[f64; 3]> {
+        let below = self.z_min_m - 0.05;
+        let up = placed.pose.rotation.transpose() * Vector3::z();
+        let (lo, hi) = placed.bounds();
+        self.points_below(|x, y| {
+            if x < lo[0] || x > hi[0] || y < lo[1] || y > hi[1] {
+                return None;
+            }
+            let origin = placed.pose.to_local(&Vector3::new(x, y, below));
+            placed
+                .indenter
+                .ray_local(&origin, &up, 1.0)
+                .map(|t| below + t)
+        })
+    }
+}
+
+/// One set-up's samples: fields on the top nodes and the inputs of the NPE.
+#[derive(Debug, Clone)]
+pub struct SetupSamples {
+    /// Set-up name.
+    pub name: String,
+    /// Indenter name.
+    pub indenter: String,
+    /// From the unseen-indenter set.
+    pub unseen: bool,
+    /// Depth of each sample, m.
+    pub depth_m: Vec<f64>,
+    /// Force of the gel on the indenter, N.
+    pub force_n: Vec<[f64; 3]>,
+    /// Indenter origin in the sensor frame, m.
+    pub translation_m: Vec<[f64; 3]>,
+    /// Displacement of the top nodes, m.
+    pub displacement_m: Vec<Vec<[f64; 3]>>,
+    /// Contact force on the top nodes, N.
+    pub nodal_force_n: Vec<Vec<[f64; 3]>>,
+    /// Contact points in the sensor frame, m.
+    pub points_m: Vec<Vec<[f64; 3]>>,
+}
+
+/// Per-set-up entry of the manifest.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SetupEntry {
+    /// Set-up name.
+    pub name: String,
+    /// Indenter name.
+    pub indenter: String,
+    /// From the unseen-indenter set.
+    pub unseen: bool,
+    /// Indenter origin over the gel (x, y), m.
+    pub xy_m: [f64; 2],
+    /// Euler angles, degrees (R = Rz Ry Rx).
+    pub euler_deg: [f64; 3],
+    /// Samples saved.
+    pub samples: usize,
+    /// Contact points over all samples.
+    pub points: usize,
+}
+
+/// The dataset's manifest (`manifest.json`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Format tag.
+    pub format: String,
+    /// Gel mesh file.
+    pub mesh: String,
+    /// Mesh nodes.
+    pub mesh_nodes: usize,
+    /// Top-face nodes (rows of every nodal array).
+    pub top_nodes: usize,
+    /// Generation options.
+    pub options: DatasetOptions,
+    /// Gel Young's modulus, Pa, and Poisson's ratio.
+    pub material: [f64; 2],
+    /// What each file holds, with shapes and units.
+    pub files: std::collections::BTreeMap<String, String>,
+    /// Set-ups with samples.
+    pub setups: Vec<SetupEntry>,
+    /// Set-ups whose FEM stopped before the last depth (their converged steps are kept) or
+    /// did not start, with the reason.
+    pub stopped: Vec<(String, String)>,
+}
+
+const FORMAT: &str = "ocm-tactile-dataset/1";
+
+fn file_docs() -> std::collections::BTreeMap<String, String> {
+    [
+        (
+            "top_nodes.npy",
+            "(M, 1) mesh node index of each top-face node",
+        ),
+        (
+            "top_rest_m.npy",
+            "(M, 3) rest position of each top node, m, sensor frame",
+        ),
+        (
+            "top_edges.npy",
+            "(E, 2) undirected top-triangle edges, indices into the top nodes",
+        ),
+        (
+            "<setup>/depth_m.npy",
+            "(S, 1) indentation depth from first touch, m",
+        ),
+        (
+            "<setup>/force_n.npy",
+            "(S, 3) force of the gel on the indenter, N",
+        ),
+        (
+            "<setup>/translation_m.npy",
+            "(S, 3) indenter origin in the sensor frame, m",
+        ),
+        (
+            "<setup>/displacement_m.npy",
+            "(S, 3M) top-node displacement, node-major (x, y, z), m",
+        ),
+        (
+            "<setup>/nodal_force_n.npy",
+            "(S, 3M) contact force on the top nodes, node-major, N",
+        ),
+        (
+            "<setup>/points_m.npy",
+            "(P, 3) contact points of all samples, sample after sample, m",
+        ),
+        (
+            "<setup>/point_counts.npy",
+            "(S, 1) contact points per sample",
+        ),
+    ]
+    .into_iter()
+    .map(|(a, b)| (a.to_string(), b.to_string()))
+    .collect()
+}
+
+fn write_npy(path: &Path, data: &[f64], rows: usize, cols: usize) -> Result<()> {
+    Ok(ocm_fem::npy::write_f64_2d_path(path, data, rows, cols)?)
+}
+
+fn flat3(v: &[[f64; 3]]) -> Vec<f64> {
+    v.iter().flatten().copied().collect()
+}
+
+/// The FEM steps cached in `dir` (`u_NNN.npy`, `f_NNN.npy` over all mesh nodes, as `ocm tactile
+/// indent` writes them): the consecutive steps from 1 found there, at most `opts.steps`. The
+/// force on the indenter is minus the sum of the nodal contact forces (as the FEM reports it).
+/// A `force_depth.csv` beside them must list the same depths, else the cache is refused.
+fn read_cache(dir: &Path, opts: &DatasetOptions, nodes: usize) -> Result<Vec<StepOutput>> {
+    let mut out = Vec::new();
+    for k in 1..=opts.steps {
+        let (u, f) = (
+            dir.join(format!("u_{k:03}.npy")),
+            dir.join(format!("f_{k:03}.npy")),
+        );
+        if !(u.exists() && f.exists()) {
+            break;
+        }
+        let read = |p: &Path| -> Result<Vec<[f64; 3]>> {
+            let a = ocm_fem::npy::read_f64_2d(p)?;
+            if a.rows != nodes || a.cols != 3 {
+                return Err(TactileError::Input(format!(
+                    "{} is {} x {}, expected {nodes} x 3 (another mesh?)",
+                    p.display(),
+                    a.rows,
+                    a.cols
+                )));
+            }
+            Ok(a.data.chunks(3).map(|c| [c[0], c[1], c[2]]).collect())
+        };
+        let contact_force = read(&f)?;
+        let mut total = [0.0; 3];
+        for v in &contact_force {
+            for d in 0..3 {
+                total[d] -= v[d];
+            }
+        }
+        out.push(StepOutput {
+            step: k,
+            depth_m: k as f64 * opts.step_m,
+            displacement: read(&u)?,
+            contact_force,
+            indenter_force_n: total,
+            newton_iterations: 0,
+            multiplier_updates: 0,
+            max_penetration_m: 0.0,
+            residual_n: 0.0,
+            active_nodes: 0,
+            slipping_nodes: 0,
+            cuts: 0,
+        });
+    }
+    if let Ok(csv) = std::fs::read_to_string(dir.join("force_depth.csv")) {
+        for (line, st) in csv.lines().skip(1).zip(&out) {
+            let depth_mm: f64 = line
+                .split(',')
+                .nth(1)
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(f64::NAN);
+            if !((depth_mm * 1e-3 - st.depth_m).abs() < 1e-9) {
+                return Err(TactileError::Input(format!(
+                    "{}: step {} is at {depth_mm} mm, the dataset wants {} mm (another protocol?)",
+                    dir.join("force_depth.csv").display(),
+                    st.step,
+                    st.depth_m * 1e3
+                )));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// The samples of one set-up: the FEM steps from `cache` (reused when there, else run and
+/// written there; a step that does not converge ends the set-up, and the reason is returned
+/// beside the steps before it) and the contact points at each depth.
+pub fn setup_samples(
+    gel: &Gel,
+    top: &TopSurface,
+    cgrid: &ContactGrid,
+    setup: &Setup,
+    opts: &DatasetOptions,
+    cache: &Path,
+) -> Result<(SetupSamples, Option<String>)> {
+    let indenter = Indenter::from_stl(&setup.stl)?;
+    let mut iopts = IndentOptions::protocol(gel.material.young_pa);
+    iopts.steps = opts.steps;
+    iopts.step_m = opts.step_m;
+    let mut run = Indentation::new(&setup.name, gel, &indenter, setup.placement, iopts)?;
+    let mut steps = read_cache(cache, opts, gel.num_nodes())?;
+    let mut stopped = None;
+    if steps.is_empty() {
+        std::fs::create_dir_all(cache).map_err(|e| TactileError::io(cache, e))?;
+        let grid = Grid::for_gel(gel);
+        let mut rows = Vec::new();
+        for k in 1..=opts.steps {
+            match run.advance_to(k as f64 * opts.step_m) {
+                Ok(st) => {
+                    rows.push(StepRow::new(
+                        &st,
+                        write_step(cache, gel, &grid, &st, false)?,
+                    ));
+                    steps.push(st);
+                }
+                Err(e @ TactileError::NoConvergence { .. }) => {
+                    stopped = Some(e.to_string());
+                    break;
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        write_force_depth_csv(&cache.join("force_depth.csv"), &rows)?;
+    } else if steps.len() < opts.steps {
+        stopped = Some(format!(
+            "the FEM cache {} holds the first {} of {} steps",
+            cache.display(),
+            steps.len(),
+            opts.steps
+        ));
+    }
+    let mut s = SetupSamples {
+        name: setup.name.clone(),
+        indenter: indenter.name.clone(),
+        unseen: setup.unseen,
+        depth_m: Vec::new(),
+        force_n: Vec::new(),
+        translation_m: Vec::new(),
+        displacement_m: Vec::new(),
+        nodal_force_n: Vec::new(),
+        points_m: Vec::new(),
+    };
+    for st in &steps {
+        let pose = run.pose_at(st.depth_m);
+        let placed = Placed {
+            indenter: &indenter,
+            pose,
+        };
+        s.depth_m.push(st.depth_m);
+        s.force_n.push(st.indenter_force_n);
+        s.translation_m.push(pose.translation.into());
+        s.displacement_m.push(top.restrict(&st.displacement));
+        s.nodal_force_n.push(top.restrict(&st.contact_force));
+        s.points_m.push(cgrid.contact_points(&placed));
+    }
+    Ok((s, stopped))
+}
+
+/// Writes one set-up's arrays into `dir`.
+pub fn write_setup(dir: &Path, s: &SetupSamples) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| TactileError::io(dir, e))?;
+    let n = s.depth_m.len();
+    let m = s.displacement_m.first().map_or(0, Vec::len);
+    write_npy(&dir.join("depth_m.npy"), &s.depth_m, n, 1)?;
+    write_npy(&dir.join("force_n.npy"), &flat3(&s.force_n), n, 3)?;
+    write_npy(
+        &dir.join("translation_m.npy"),
+        &flat3(&s.translation_m),
+        n,
+        3,
+    )?;
+    let u: Vec<f64> = s.displacement_m.iter().flat_map(|v| flat3(v)).collect();
+    write_npy(&dir.join("displacement_m.npy"), &u, n, 3 * m)?;
+    let f: Vec<f64> = s.nodal_force_n.iter().flat_map(|v| flat3(v)).collect();
+    write_npy(&dir.join("nodal_force_n.npy"), &f, n, 3 * m)?;
+    let p: Vec<f64> = s.points_m.iter().flat_map(|v| flat3(v)).collect();
+    write_npy(&dir.join("points_m.npy"), &p, p.len() / 3, 3)?;
+    let c: Vec<f64> = s.points_m.iter().map(|v| v.len() as f64).collect();
+    write_npy(&dir.join("point_counts.npy"), &c, n, 1)
+}
+
+/// Builds the dataset of `setups` into `out` (FEM steps cached under `cache/<setup>`),
+/// calling `progress(name, index)` before each set-up. A set-up whose FEM stops early keeps its
+/// converged depths and is listed in the manifest's `stopped` with the reason.
+pub fn build(
+    gel: &Gel,
+    mesh_name: &str,
+    setups: &[Setup],
+    opts: &DatasetOptions,
+    cache: &Path,
+    out: &Path,
+    mut progress: impl FnMut(&str, usize),
+) -> Result<Manifest> {
+    std::fs::create_dir_all(out).map_err(|e| TactileError::io(out, e))?;
+    let top = TopSurface::from_gel(gel);
+    let cgrid = ContactGrid::for_gel(gel, opts.grid_spacing_m)?;
+    let idx: Vec<f64> = top.nodes.iter().map(|&i| i as f64).collect();
+    write_npy(&out.join("top_nodes.npy"), &idx, idx.len(), 1)?;
+    write_npy(
+        &out.join("top_rest_m.npy"),
+        &flat3(&top.rest_m),
+        top.rest_m.len(),
+        3,
+    )?;
+    let e: Vec<f64> = top.edges.iter().flatten().map(|&i| i as f64).collect();
+    write_npy(&out.join("top_edges.npy"), &e, top.edges.len(), 2)?;
+    let mut manifest = Manifest {
+        format: FORMAT.into(),
+        mesh: mesh_name.into(),
+        mesh_nodes: gel.num_nodes(),
+        top_nodes: top.nodes.len(),
+        options: *opts,
+        material: [gel.material.young_pa, gel.material.poisson],
+        files: file_docs(),
+        setups: Vec::new(),
+        stopped: Vec::new(),
+    };
+    for (k, setup) in setups.iter().enumerate() {
+        progress(&setup.name, k);
+        match setup_samples(gel, &top, &cgrid, setup, opts, &cache.join(&setup.name)) {
+            Ok((s, stopped)) => {
+                if let Some(why) = stopped {
+                    manifest.stopped.push((setup.name.clone(), why));
+                }
+                if s.depth_m.is_empty() {
+                    continue;
+                }
+                write_setup(&out.join(&setup.name), &s)?;
+                manifest.setups.push(SetupEntry {
+                    name: s.name.clone(),
+                    indenter: s.indenter.clone(),
+                    unseen: s.unseen,
+                    xy_m: setup.placement.xy_m,
+                    euler_deg: setup.placement.euler_deg,
+                    samples: s.depth_m.len(),
+                    points: s.points_m.iter().map(Vec::len).sum(),
+                });
+            }
+            Err(e @ TactileError::OffGel { .. }) => {
+                manifest.stopped.push((setup.name.clone(), e.to_string()));
+            }
+            Err(e) => return Err(e),
+        }
+        let text = serde_json::to_string_pretty(&manifest)
+            .map_err(|e| TactileError::Input(format!("manifest: {e}")))?;
+        let path = out.join("manifest.json");
+        std::fs::write(&path, text).map_err(|e| TactileError::io(&path, e))?;
+    }
+    Ok(manifest)
+}
+
+/// A dataset read back: the top-face graph and every set-up's samples.
+#[derive(Debug, Clone)]
+pub struct Dataset {
+    /// The folder.
+    pub dir: PathBuf,
+    /// Its manifest.
+    pub manifest: Manifest,
+    /// Rest positions of the top nodes, m.
+    pub top_rest_m: Vec<[f64; 3]>,
+    /// Top-face edges.
+    pub top_edges: Vec<[usize; 2]>,
+    /// Samples per set-up, in manifest order.
+    pub setups: Vec<SetupSamples>,
+}
+
+impl Dataset {
+    /// Reads a dataset written by [`build`]; a missing file or a shape that disagrees with the
+    /// manifest is an error naming the file.
+    pub fn read(dir: &Path) -> Result<Self> {
+        let mpath = dir.join("manifest.json");
+        let text = std::fs::read_to_string(&mpath).map_err(|e| TactileError::io(&mpath, e))?;
+        let manifest: Manifest = serde_json::from_str(&text)
+            .map_err(|e| TactileError::Input(format!("{}: {e}", mpath.display())))?;
+        if manifest.format != FORMAT {
+            return Err(TactileError::Input(format!(
+                "{}: format '{}', expected '{FORMAT}'",
+                mpath.display(),
+                manifest.format
+            )));
+        }
+        let m = manifest.top_nodes;
+        let read = |p: PathBuf, cols: usize, rows: Option<usize>| -> Result<Vec<f64>> {
+            let a = ocm_fem::npy::read_f64_2d(&p)?;
+            if a.cols != cols || rows.is_some_and(|r| r != a.rows) {
+                return Err(TactileError::Input(format!(
+                    "{}: {} x {} does not match the manifest",
+                    p.display(),
+                    a.rows,
+                    a.cols
+                )));
+            }
+            Ok(a.data)
+        };
+        let rows3 =
+            |v: Vec<f64>| -> Vec<[f64; 3]> { v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect() };
+        let top_rest_m = rows3(read(dir.join("top_rest_m.npy"), 3, Some(m))?);
+        let top_edges = read(dir.join("top_edges.npy"), 2, None)?
+            .chunks(2)
+            .map(|c| [c[0] as usize, c[1] as usize])
+            .collect::<Vec<_>>();
+        if let Some(e) = top_edges.iter().find(|e| e[0] >= m || e[1] >= m) {
+            return Err(TactileError::Input(format!(
+                "{}: edge {e:?} names a node beyond the {m} top nodes",
+                dir.join("top_edges.npy").display()
+            )));
+        }
+        let mut setups = Vec::new();
+        for e in &manifest.setups {
+            let d = dir.join(&e.name);
+            let n = Some(e.samples);
+            let depth_m = read(d.join("depth_m.npy"), 1, n)?;
+            let counts = read(d.join("point_counts.npy"), 1, n)?;
+            let pts = rows3(read(d.join("points_m.npy"), 3, None)?);
+            let total: f64 = counts.iter().sum();
+            if total as usize != pts.len() {
+                return Err(TactileError::Input(format!(
+                    "{}: {} points but the counts add to {total}",
+                    d.join("points_m.npy").display(),
+                    pts.len()
+                )));
+            }
+            let mut points_m = Vec::new();
+            let mut at = 0;
+            for &c in &counts {
+                points_m.push(pts[at..at + c as usize].to_vec());
+                at += c as usize;
+            }
+            let fields = |name: &str| -> Result<Vec<Vec<[f64; 3]>>> {
+                Ok(read(d.join(name), 3 * m, n)?
+                    .chunks(3 * m)
+                    .map(|r| rows3(r.to_vec()))
+                    .collect())
+            };
+            setups.push(SetupSamples {
+                name: e.name.clone(),
+                indenter: e.indenter.clone(),
+                unseen: e.unseen,
+                force_n: rows3(read(d.join("force_n.npy"), 3, n)?),
+                translation_m: rows3(read(d.join("translation_m.npy"), 3, n)?),
+                displacement_m: fields("displacement_m.npy")?,
+                nodal_force_n: fields("nodal_force_n.npy")?,
+                depth_m,
+                points_m,
+            });
+        }
+        Ok(Dataset {
+            dir: dir.to_path_buf(),
+            manifest,
+            top_rest_m,
+            top_edges,
+            setups,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gel::GelMaterial;
+    use crate::indenter::Pose;
+    use nalgebra::Matrix3;
+
+    /// A flat 6 x 4 x 2 mm block of tets (top at z = 2 mm), base fixed.
+    fn block() -> Gel {
+        let mesh = ocm_fem::mesh::generate::box_mesh([12, 8, 2], [6e-3, 4e-3, 2e-3]);
+        Gel::from_mesh(mesh, GelMaterial::default(), 1e-9).unwrap()
+    }
+
+    /// Lowest point at the origin, centre at (0, 0, r).
+    fn sphere(radius: f64) -> Indenter {
+        crate::shapes::sphere(radius, 48).unwrap()
+    }
+
+    #[test]
+    fn top_surface_graph_of_a_block() {
+        let gel = block();
+        let top = TopSurface::from_gel(&gel);
+        assert_eq!(top.nodes.len(), 13 * 9);
+        assert!(top.rest_m.iter().all(|p| (p[2] - 2e-3).abs() < 1e-12));
+        // A structured grid of 12 x 8 squares, each split into two triangles: horizontal,
+        // vertical and one diagonal per square.
+        assert_eq!(top.edges.len(), 12 * 9 + 13 * 8 + 12 * 8);
+        let f: Vec<[f64; 3]> = (0..gel.num_nodes()).map(|i| [i as f64, 0.0, 0.0]).collect();
+        let back = top.extend(&top.restrict(&f), gel.num_nodes());
+        for &i in &top.nodes {
+            assert_eq!(back[i], f[i]);
+        }
+    }
+
+    /// A sphere of radius R pressed d into a flat face: the contact points are the grid points
+    /// within sqrt(2 R d - d^2) of the axis, each on the sphere's lower surface, the deepest
+    /// d below the face.
+    #[test]
+    fn contact_points_of_a_sphere_match_the_cap() {
+        let gel = block();
+        let spacing = 0.1e-3;
+        let cg = ContactGrid::for_gel(&gel, spacing).unwrap();
+        let r = 1.5e-3;
+        let ind = sphere(r);
+        let (cx, cy, d) = (3.0e-3, 2.0e-3, 0.2e-3);
+        let placed = Placed {
+            indenter: &ind,
+            pose: Pose {
+                rotation: Matrix3::identity(),
+                translation: Vector3::new(cx, cy, 2e-3 - d),
+            },
+        };
+        let pts = cg.contact_points(&placed);
+        let a = (2.0 * r * d - d * d).sqrt();
+        let mut expect = 0;
+        for row in 0..cg.grid.rows {
+            for col in 0..cg.grid.cols {
+                let [x, y] = cg.grid.center(row, col);
+                // The polygonal sphere lies inside the true one: keep clear of the rim.
+                let rho = ((x - cx).powi(2) + (y - cy).powi(2)).sqrt();
+                if rho < a - 0.02e-3 {
+                    expect += 1;
+                }
+            }
+        }
+        assert!(
+            pts.len() as f64 >= expect as f64 * 0.97 && pts.len() as f64 <= expect as f64 * 1.1,
+            "{} points, about {expect} expected",
+            pts.len()
+        );
+        let mut deepest: f64 = 0.0;
+        for p in &pts {
+            let rho2 = (p[0] - cx).powi(2) + (p[1] - cy).powi(2);
+            let z_true = 2e-3 - d + r - (r * r - rho2).max(0.0).sqrt();
+            // Chord error of the graded 48-band tessellation of a 1.5 mm sphere: below 10 um.
+            assert!((p[2] - z_true).abs() < 10e-6, "{p:?} vs z {z_true}");
+            assert!(p[2] < 2e-3);
+            deepest = deepest.max(2e-3 - p[2]);
+        }
+        assert!((deepest - d).abs() < 5e-6, "deepest {deepest} vs depth {d}");
+        // Lifted clear of the face: no contact points.
+        let lifted = Placed {
+            indenter: &ind,
+            pose: Pose {
+                rotation: Matrix3::identity(),
+                translation: Vector3::new(cx, cy, 2e-3 + 1e-4),
+            },
+        };
+        assert!(cg.contact_points(&lifted).is_empty());
+        // Beside the gel: no contact points either.
+        let beside = Placed {
+            indenter: &ind,
+            pose: Pose {
+                rotation: Matrix3::identity(),
+                translation: Vector3::new(20e-3, cy, 2e-3 - d),
+            },
+        };
+        assert!(cg.contact_points(&beside).is_empty());
+    }
+
+    #[test]
+    fn bad_spacing_is_an_error() {
+        let gel = block();
+        assert!(ContactGrid::for_gel(&gel, 0.0).is_err());
+        assert!(ContactGrid::for_gel(&gel, f64::NAN).is_err());
+    }
+}
