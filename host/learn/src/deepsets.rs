@@ -169,22 +169,11 @@ mod tests {
             let out = enc.forward(Some(x.clone()), &[3, 2], &device);
             ((out.clone() * out).sum(), x)
         };
-        let (l, x) = loss(&base, true);
-        let grad = values(x.grad(&l.backward()).unwrap());
-        for k in 0..15 {
-            let h = 1e-2f32;
-            let mut up = base.clone();
-            up[k] += h;
-            let mut down = base.clone();
-            down[k] -= h;
-            let fd = (f64::from(values(loss(&up, false).0)[0])
-                - f64::from(values(loss(&down, false).0)[0]))
-                / (2.0 * f64::from(h));
-            let ad = f64::from(grad[k]);
-            assert!(
-                (fd - ad).abs() < 3e-3 + 3e-2 * ad.abs().max(fd.abs()),
-                "coordinate {k}: autodiff {ad:.5} vs finite difference {fd:.5}"
-            );
+        let pairs =
+            crate::gradcheck::gradient_pairs(&base, &(0..15).collect::<Vec<_>>(), 1e-2, loss)
+                .unwrap();
+        for p in pairs {
+            assert!(p.agrees(3e-3, 3e-2), "coordinate {}: {p:?}", p.index);
         }
     }
 }

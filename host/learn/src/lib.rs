@@ -12,6 +12,7 @@ pub mod curve;
 pub mod deepsets;
 pub mod error;
 pub mod gcn;
+pub mod gradcheck;
 pub mod init;
 pub mod mlp;
 pub mod scaling;
