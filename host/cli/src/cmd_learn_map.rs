@@ -21,7 +21,7 @@ use ocm_surrogate::model::{MapErrors, SurrogateModel, map_errors};
 use serde::Serialize;
 
 use crate::cmd_fem::{BELLOWS_MESH, data_path};
-use crate::cmd_learn::{EvalArgs, TrainArgs};
+use crate::cmd_learn_args::{EvalArgs, TrainArgs};
 
 /// f_RS checkpoint name in the output folder.
 const FRS_FILE: &str = "frs.ckpt";

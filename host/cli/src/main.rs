@@ -5,6 +5,7 @@ use clap::{Parser, Subcommand};
 mod cmd_fem;
 mod cmd_ident;
 mod cmd_learn;
+mod cmd_learn_args;
 mod cmd_learn_map;
 mod cmd_lut;
 mod cmd_model;

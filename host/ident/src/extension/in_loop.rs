@@ -17,6 +17,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::dynamic_features::LoopSignal;
 use super::prepared::Prepared;
+use super::refined::{Cached, InLoopFit};
 use crate::cause::Cause;
 use crate::lsq;
 use crate::signal;
@@ -32,34 +33,6 @@ const ITERATIONS: usize = 25;
 /// Relative decrease of the training cost below which the refinement stops: the criteria
 /// compare `N ln(RSS)`, so with N in the thousands a smaller decrease changes no decision.
 const TOLERANCE: f64 = 1e-5;
-
-/// The result of an in-loop refinement of one output channel.
-#[derive(Debug, Clone)]
-pub(super) struct InLoopFit {
-    /// Prediction on every row.
-    pub pred: Vec<f64>,
-    /// Training RSS on every training row.
-    pub rss: f64,
-    /// Extension weights (per drive, per signal) and their standard errors.
-    pub weights: Vec<(f64, f64)>,
-    /// Parameters beyond the linear fit's: the internal coordinate's `n` coefficients.
-    pub extra: usize,
-}
-
-/// A finished refinement, kept for the selection's repeated and growing sets.
-#[derive(Debug, Clone)]
-pub(crate) struct Cached {
-    channel: usize,
-    causes: Vec<Cause>,
-    flexible: Option<Cause>,
-    /// `A, B, C, D, d` as laid out in the parameter vector.
-    shared: Vec<f64>,
-    /// Initial-state offsets.
-    x0: Vec<f64>,
-    /// Weights per cause (per drive, per signal).
-    weights: Vec<Vec<f64>>,
-    fit: InLoopFit,
-}
 
 /// Parameter layout: `A` (n x n, column-major), `B` (n x m), `C` (n), `D` (m), `d`, weights
 /// (drives x signals), initial-state offsets (n per fitted segment).

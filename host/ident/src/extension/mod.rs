@@ -8,6 +8,7 @@ mod features;
 mod in_loop;
 mod joint_fit;
 mod prepared;
+mod refined;
 
 pub use features::Features;
 pub use joint_fit::SetFit;

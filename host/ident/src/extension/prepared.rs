@@ -61,7 +61,7 @@ pub struct Prepared<'a> {
     pub flexible: std::cell::Cell<Option<Cause>>,
     /// In-loop refinements already done, per channel and set of causes (see `in_loop`): the
     /// selection fits the same sets repeatedly, and a larger set starts from a smaller one.
-    pub(super) in_loop_cache: std::cell::RefCell<Vec<super::in_loop::Cached>>,
+    pub(super) in_loop_cache: std::cell::RefCell<Vec<super::refined::Cached>>,
 }
 
 impl<'a> Prepared<'a> {
