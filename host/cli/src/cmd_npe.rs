@@ -115,6 +115,19 @@ fn split_of(model: &Path) -> anyhow::Result<SetupSplit> {
         .with_context(|| format!("{}: no set-up split stored", model.display()))
 }
 
+/// A trained engine, the set-up split it was trained with, and the data set prepared in
+/// its scales: what `eval` and `bench` both start from.
+fn load_with_data(
+    model: &Path,
+    dataset: &Path,
+) -> anyhow::Result<(Npe, SetupSplit, Dataset, Prepared)> {
+    let npe = Npe::load(model)?;
+    let split = split_of(model)?;
+    let ds = Dataset::read(dataset)?;
+    let p = Prepared::from_dataset(&ds, &npe.config.scales);
+    Ok((npe, split, ds, p))
+}
+
 fn write_scores_csv(path: &Path, per: &[SampleScore]) -> anyhow::Result<()> {
     let mut s = String::from(
         "setup,depth_mm,contact_accuracy,rmse_mm,orientation_deg,force_pred_n,force_fem_n\n",
@@ -225,10 +238,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             images,
             json,
         } => {
-            let npe = Npe::load(&model)?;
-            let split = split_of(&model)?;
-            let ds = Dataset::read(&dataset)?;
-            let p = Prepared::from_dataset(&ds, &npe.config.scales);
+            let (npe, split, ds, p) = load_with_data(&model, &dataset)?;
             let digit = ocm_datadir::data_file(data.as_deref(), "digit")?;
             let gel = Gel::digit(
                 digit.join(&ds.manifest.mesh),
@@ -333,10 +343,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             threads,
             json,
         } => {
-            let npe = Npe::load(&model)?;
-            let split = split_of(&model)?;
-            let ds = Dataset::read(&dataset)?;
-            let p = Prepared::from_dataset(&ds, &npe.config.scales);
+            let (npe, split, _, p) = load_with_data(&model, &dataset)?;
             let idx = p.samples_of(&split.test);
             let &i = idx
                 .iter()
