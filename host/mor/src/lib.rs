@@ -5,7 +5,8 @@
 //! -> [`pod`] (randomized SVD basis) -> [`rom`] (Galerkin projection, ECSW hyper-reduction via
 //! [`nnls`], reduced statics and implicit dynamics) -> [`xs`] (X_S of a full or reduced state) ->
 //! [`dataset`] (NPY + JSON manifest, shards). [`store`] keeps bases and reduced models on disk with
-//! their hashes.
+//! their hashes. [`weighted`] is the stiffness-weighted POD (measured, not better for the bellows:
+//! see the README's error budget).
 
 #![allow(clippy::needless_range_loop)]
 
@@ -19,6 +20,7 @@ pub mod pod;
 pub mod rom;
 pub mod run;
 pub mod store;
+pub mod weighted;
 pub mod xs;
 
 pub use error::{MorError, Result, sha256_f64, sha256_hex};

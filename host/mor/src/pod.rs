@@ -168,7 +168,11 @@ pub fn pod(a: MatRef<'_, f64>, opts: &PodOptions) -> Result<Pod> {
     }
     drop(z);
     drop(y);
-    // B^T = A^T Q (n x k): its thin SVD B^T = W S V^T gives B = V S W^T and U = Q V.
+    // B^T = A^T Q (n x k) = Q_b R. The SVD of the small triangle R = U_r S V^T
+    // gives B's singular values and B = V S (Q_b U_r)^T, so U = Q V: neither
+    // Q_b nor the n x k left factor is ever formed. The thin SVD of B^T itself
+    // (a bidiagonalisation of the tall matrix, mostly memory-bound) cost the
+    // most time of the whole POD at the benchmark's size.
     let mut bt = Mat::<f64>::zeros(n, k);
     matmul(
         bt.as_mut(),
@@ -178,8 +182,10 @@ pub fn pod(a: MatRef<'_, f64>, opts: &PodOptions) -> Result<Pod> {
         1.0,
         par,
     );
-    let svd = bt
-        .thin_svd()
+    let r_factor = bt.qr().thin_R().to_owned();
+    drop(bt);
+    let svd = r_factor
+        .svd()
         .map_err(|e| MorError::Solve(format!("SVD of the sketch did not converge: {e:?}")))?;
     let s: Vec<f64> = (0..k).map(|i| svd.S()[i]).collect();
     let total_energy = a.squared_norm_l2();

@@ -25,11 +25,28 @@ use serde::Serialize;
 /// an orthonormal basis of displacements): the full solver's `dx_tol`.
 const DQ_TOL: f64 = 1e-12;
 
+/// Default relative residual tolerance of the reduced Newton ([`ReducedModel::rtol`]): 1e-5, ten
+/// times the full solver's; measured on held-out bellows trajectories it changes the TCP by
+/// under 0.02 mm at ranks 16 and 32 and saves ~20% of the iterations (crate README).
+pub const DEFAULT_RTOL: f64 = 1e-5;
+
 /// Newton iterations of a reduced step before it is halved.
 const MAX_ITERATIONS: usize = 60;
 
 /// Default of [`ReducedModel::damping_tangent_age`].
 pub const DEFAULT_DAMPING_TANGENT_AGE: usize = 10;
+
+/// The first Newton iterate of a reduced step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum Predictor {
+    /// q_n + h q'_n (the full solver's start).
+    ConstantVelocity,
+    /// q_n + h q'_n + c h^2 q''_n (c = 1 for backward Euler, where it extrapolates the velocity
+    /// of the last two steps linearly; 1/2 for Newmark). On the bellows it saves ~6% of the
+    /// iterations, but where the inputs jump it starts far off, Newton can fail and the step is
+    /// halved (a different discrete solution), so it is not the default.
+    ConstantAcceleration,
+}
 
 /// One element of the reduced force sum.
 #[derive(Debug, Clone)]
@@ -113,6 +130,8 @@ pub struct ReducedModel {
     /// a step start (1: refreshed at every step start, exactly as the full solver; larger values
     /// lag the damping tangent by up to this many steps, see the crate README).
     pub damping_tangent_age: usize,
+    /// First iterate of each step.
+    pub predictor: Predictor,
 }
 
 /// Elements that carry strain: all but those whose four nodes lie on one rigid body.
@@ -129,6 +148,26 @@ pub fn straining_elements(model: &Model) -> Vec<usize> {
             !(body[n[0]] != usize::MAX && n.iter().all(|&i| body[i] == body[n[0]]))
         })
         .collect()
+}
+
+/// Dot product with eight independent partial sums: a single running sum is a chain of dependent
+/// additions that the compiler may not reorder, bound by the add latency instead of throughput.
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let mut s: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    let mut acc = [0.0; 8];
+    for (x, y) in ca.zip(cb) {
+        for i in 0..8 {
+            acc[i] += x[i] * y[i];
+        }
+    }
+    s += ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]));
+    s
 }
 
 fn rows3(basis: &DMatrix<f64>, node: usize, d: usize, k: usize) -> f64 {
@@ -229,8 +268,9 @@ impl ReducedModel {
             material: model.material,
             alpha: model.rayleigh_alpha,
             beta: model.rayleigh_beta,
-            rtol: 1e-6,
+            rtol: DEFAULT_RTOL,
             damping_tangent_age: DEFAULT_DAMPING_TANGENT_AGE,
+            predictor: Predictor::ConstantVelocity,
         })
     }
 
@@ -453,6 +493,7 @@ impl ReducedModel {
             beta: self.beta,
             rtol: self.rtol,
             damping_tangent_age: self.damping_tangent_age,
+            predictor: self.predictor,
         }
     }
 
@@ -744,7 +785,7 @@ impl<'a> Stepper<'a> {
             let sk = &self.psym[k * r * r..(k + 1) * r * r];
             for j in 0..r {
                 let row = &sk[j * r..(j + 1) * r];
-                self.w[j] = row.iter().zip(q).map(|(a, b)| a * b).sum();
+                self.w[j] = dot(row, q);
             }
             let lk = &self.plin[k * r..(k + 1) * r];
             let mut val = self.pg0[k] + rom.gravity[k];
@@ -812,13 +853,7 @@ impl<'a> Stepper<'a> {
         }
         let fe = self.fe.col_as_slice(0);
         for k in 0..r {
-            self.f[k] = self
-                .vall
-                .col_as_slice(k)
-                .iter()
-                .zip(fe)
-                .map(|(a, b)| a * b)
-                .sum();
+            self.f[k] = dot(self.vall.col_as_slice(k), fe);
         }
         if tangent {
             let mut k = faer::Mat::<f64>::zeros(r, r);
@@ -896,17 +931,36 @@ impl<'a> Stepper<'a> {
                 }
             }
         };
-        // Predictor: constant velocity.
-        let mut q: Vec<f64> = (0..r).map(|i| qn[i] + h * vn[i]).collect();
+        let c2 = match (rom.predictor, integrator) {
+            (Predictor::ConstantVelocity, _) => 0.0,
+            (Predictor::ConstantAcceleration, Integrator::ImplicitEuler) => h * h,
+            (Predictor::ConstantAcceleration, Integrator::Newmark { .. }) => 0.5 * h * h,
+        };
+        let mut q: Vec<f64> = (0..r).map(|i| qn[i] + h * vn[i] + c2 * an[i]).collect();
         let (mut a, mut v) = (vec![0.0; r], vec![0.0; r]);
         let mut res = vec![0.0; r];
         let mut last = f64::INFINITY;
         let mut fresh = false;
         let mut iterations = 0;
+        let mut fallback = c2 != 0.0;
         for it in 0..MAX_ITERATIONS {
             kin(&q, &mut a, &mut v);
             self.external(&q, &tip);
-            self.sweep(&q, false)?;
+            match self.sweep(&q, false) {
+                Ok(()) => {}
+                Err(_) if fallback && iterations == 0 => {
+                    // The extrapolation inverted an element (a sudden change of the inputs): start
+                    // from the constant-velocity predictor rather than halving the step.
+                    fallback = false;
+                    for i in 0..r {
+                        q[i] = qn[i] + h * vn[i];
+                    }
+                    kin(&q, &mut a, &mut v);
+                    self.external(&q, &tip);
+                    self.sweep(&q, false)?;
+                }
+                Err(e) => return Err(e),
+            }
             // Residual M a + (alpha M + beta K_d) v + f(q) - g(q).
             let (mut n_ma, mut n_f, mut n_g) = (0.0f64, 0.0f64, 0.0f64);
             for i in 0..r {
