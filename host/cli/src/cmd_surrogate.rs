@@ -55,9 +55,11 @@ pub enum SurrogateCommand {
         json: bool,
     },
     /// Algorithm 1 (bounded L-BFGS-B under the grouped constraints) on every sample, f_SP and its
-    /// inverse, errors on training and held-out samples, force calibration on the jig (FEM and
-    /// surrogate holding the TCP at the FEM's rest TCP); writes surrogate.json, surrogate.urdf,
-    /// map_errors.csv, force_calibration.csv and the plots workspace_xz / workspace_yz / map_error.
+    /// inverse, errors on training and held-out samples, force calibration on the jig over the
+    /// whole pressure range (the FEM clamped by its top frame, the surrogate held by its TCP, both
+    /// at the FEM's rest pose); writes surrogate.json, surrogate.urdf, map_errors.csv,
+    /// force_calibration.csv and the plots workspace_xz / workspace_yz / map_error /
+    /// force_calibration_x|y|z.
     Map {
         /// FEM samples (from `ocm surrogate geometry`).
         samples: PathBuf,
@@ -67,9 +69,17 @@ pub enum SurrogateCommand {
         /// Bellows mesh (VTK, mm); default: the data directory's ManipulatorWhole25.vtk.
         #[arg(long)]
         mesh: Option<PathBuf>,
-        /// Force-calibration pressures (seeded, -10..10 kPa); 0 skips the calibration.
-        #[arg(long, default_value_t = 6)]
+        /// Force-calibration pressures besides the eight corners of -20..35 kPa (seeded random,
+        /// the same range); 0 skips the calibration.
+        #[arg(long, default_value_t = 24)]
         force_samples: usize,
+        /// Held-out force-calibration pressures (seeded random, -20..35 kPa), scored only.
+        #[arg(long, default_value_t = 12)]
+        force_held_out: usize,
+        /// How the surrogate is held on the force jig: pinned (the TCP point) or clamped (the
+        /// TCP and the plate's orientation). The FEM is always clamped by its top frame.
+        #[arg(long, default_value = "pinned")]
+        force_hold: String,
         /// Iteration cap of Algorithm 1.
         #[arg(long, default_value_t = 200)]
         max_iterations: usize,
@@ -80,12 +90,15 @@ pub enum SurrogateCommand {
         #[arg(long)]
         json: bool,
     },
-    /// Steps per second of batched surrogate environments (median of repeats).
+    /// Steps per second of batched surrogate environments, free and with contact (median of
+    /// repeats; one line per engine).
     Bench {
         /// Surrogate model (from `ocm surrogate map`).
         model: PathBuf,
-        /// batch (reduced coordinates, no contact) or rapier (multibody with contact).
-        #[arg(long, default_value = "batch")]
+        /// all, batch (reduced coordinates, free), batch-contact (reduced coordinates, plate
+        /// above the TCP, penalty contact) or rapier (multibody, plate above the TCP, rigid
+        /// contact of every link).
+        #[arg(long, default_value = "all")]
         engine: String,
         /// Environments.
         #[arg(long, default_value_t = 64)]
@@ -176,6 +189,8 @@ pub fn run(cmd: SurrogateCommand) -> anyhow::Result<()> {
             data,
             mesh,
             force_samples,
+            force_held_out,
+            force_hold,
             max_iterations,
             out,
             json,
@@ -190,24 +205,47 @@ pub fn run(cmd: SurrogateCommand) -> anyhow::Result<()> {
             let mut m =
                 SurrogateModel::build(&s, Limits::default(), cfg, |k| pb.set_position(k as u64))?;
             pb.finish_and_clear();
+            let hold = match force_hold.as_str() {
+                "pinned" => ocm_surrogate::force::JigHold::TcpPinned,
+                "clamped" => ocm_surrogate::force::JigHold::PlateClamped,
+                h => anyhow::bail!("unknown --force-hold {h:?} (pinned or clamped)"),
+            };
             if force_samples > 0 {
                 let path = data_path(mesh, data.as_deref(), BELLOWS_MESH)?;
                 let b = Bellows::load(&path, BellowsConfig::default())?;
                 let p = SurrogateModel::calibration_pressures(force_samples, 2);
-                let pb = bar(p.len(), "force jig");
-                let (sur, fem) =
-                    m.calibrate_force(&b, &p, &ocm_surrogate::sim::SceneConfig::default(), |k| {
-                        pb.set_position(k as u64)
-                    })?;
+                let held = fem_samples::random_pressures(force_held_out, 3);
+                let pb = bar(p.len() + held.len(), "force jig");
+                let fs = m.calibrate_force(
+                    &b,
+                    &p,
+                    &held,
+                    &ocm_surrogate::sim::SceneConfig::default(),
+                    hold,
+                    |k| pb.set_position(k as u64),
+                )?;
                 pb.finish_and_clear();
                 let mut csv = String::from(
-                    "p1_kpa,p2_kpa,p3_kpa,sur_fx_n,sur_fy_n,sur_fz_n,fem_fx_n,fem_fy_n,fem_fz_n\n",
+                    "set,p1_kpa,p2_kpa,p3_kpa,sur_fx_n,sur_fy_n,sur_fz_n,fem_fx_n,fem_fy_n,fem_fz_n\n",
                 );
-                for ((p, a), b) in p.iter().zip(&sur).zip(&fem) {
+                for (i, p) in fs.pressures_kpa.iter().enumerate() {
+                    let (a, b) = (fs.surrogate_n[i], fs.fem_n[i]);
                     csv.push_str(&format!(
-                        "{},{},{},{},{},{},{},{},{}\n",
-                        p[0], p[1], p[2], a[0], a[1], a[2], b[0], b[1], b[2]
+                        "{},{},{},{},{},{},{},{},{},{}\n",
+                        if i < fs.fit { "fit" } else { "held_out" },
+                        p[0],
+                        p[1],
+                        p[2],
+                        a[0],
+                        a[1],
+                        a[2],
+                        b[0],
+                        b[1],
+                        b[2]
                     ));
+                }
+                if let Some(c) = &m.force_calibration {
+                    force_plot(c, &fs, &out)?;
                 }
                 std::fs::write(out.join("force_calibration.csv"), csv)?;
             }
@@ -237,6 +275,20 @@ pub fn run(cmd: SurrogateCommand) -> anyhow::Result<()> {
                     h.inverse_rmse_kpa,
                     out.display()
                 );
+                if let Some(c) = &m.force_calibration {
+                    for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+                        println!(
+                            "force {axis}: FEM = {:.4} x surrogate + {:.3} N, fit RMSE {:.3} N, R^2 {:.3} ({} pressures); held-out RMSE {:.3} N ({})",
+                            c.slope[k],
+                            c.offset_n[k],
+                            c.rmse_n[k],
+                            c.r2[k],
+                            c.samples,
+                            c.held_out_rmse_n[k],
+                            c.held_out_samples
+                        );
+                    }
+                }
             }
         }
         SurrogateCommand::Bench {
@@ -249,32 +301,90 @@ pub fn run(cmd: SurrogateCommand) -> anyhow::Result<()> {
             json,
         } => {
             let m = SurrogateModel::read(&model)?;
-            let engine = match engine.as_str() {
-                "batch" => Engine::Batch,
-                "rapier" => Engine::Rapier,
-                e => anyhow::bail!("unknown engine {e:?} (batch or rapier)"),
-            };
-            let r = ocm_surrogate::bench::run(
-                &m.geometry.chain,
-                &m.limits,
-                &BenchConfig {
-                    engine,
-                    envs,
-                    steps,
-                    threads,
-                    repeats,
-                    seed: 1,
-                },
-            )?;
-            if json {
-                println!("{}", serde_json::to_string_pretty(&r)?);
+            let engines = if engine == "all" {
+                Engine::ALL.to_vec()
             } else {
-                println!(
-                    "{}: {:.0} steps/s (median of {}, {} envs on {} threads)",
-                    r.engine, r.steps_per_s_median, repeats, envs, threads
-                );
+                vec![Engine::parse(&engine)?]
+            };
+            let mut reports = vec![];
+            for engine in engines {
+                let r = ocm_surrogate::bench::run(
+                    &m.geometry.chain,
+                    &m.limits,
+                    &BenchConfig {
+                        engine,
+                        envs,
+                        steps,
+                        threads,
+                        repeats,
+                        seed: 1,
+                    },
+                )?;
+                if !json {
+                    println!(
+                        "{:>9.0} steps/s  {} (median of {repeats}; {envs} envs x {steps} steps on {threads} threads; TCP in contact {:.0} % of steps)",
+                        r.steps_per_s_median,
+                        r.engine,
+                        100.0 * r.contact_fraction
+                    );
+                }
+                reports.push(r);
+            }
+            if json {
+                println!("{}", serde_json::to_string_pretty(&reports)?);
             }
         }
+    }
+    Ok(())
+}
+
+/// FEM jig force against the calibrated surrogate force, one plot per component
+/// (force_calibration_x / _y / _z, Fig 4.13 D style).
+fn force_plot(
+    c: &ocm_surrogate::force::ForceCalibration,
+    fs: &ocm_surrogate::model::ForceSamples,
+    out: &std::path::Path,
+) -> anyhow::Result<()> {
+    for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+        let point = |i: usize| {
+            (
+                c.slope[k] * fs.surrogate_n[i][k] + c.offset_n[k],
+                fs.fem_n[i][k],
+            )
+        };
+        let (lo, hi) = fs
+            .fem_n
+            .iter()
+            .map(|f| f[k])
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            });
+        let x_label = format!("calibrated surrogate F_{axis} (N)");
+        let y_label = format!("FEM F_{axis} (N)");
+        Chart {
+            title: "Force calibration: FEM jig force against the calibrated surrogate's",
+            x_label: &x_label,
+            y_label: &y_label,
+            series: vec![
+                Series {
+                    label: "fit pressures".into(),
+                    points: (0..fs.fit).map(point).collect(),
+                    dots: true,
+                },
+                Series {
+                    label: "held-out pressures".into(),
+                    points: (fs.fit..fs.fem_n.len()).map(point).collect(),
+                    dots: true,
+                },
+                Series {
+                    label: "identity".into(),
+                    points: vec![(lo, lo), (hi, hi)],
+                    dots: false,
+                },
+            ],
+            equal_axes: true,
+        }
+        .write(out, &format!("force_calibration_{axis}"))?;
     }
     Ok(())
 }

@@ -1,6 +1,6 @@
 //! Builds the surrogate from cached FEM samples (the same calls as `ocm surrogate urdf` and
 //! `ocm surrogate map`) and prints the geometry and the mapping errors.
-//! `cargo run -p ocm-surrogate --example build_model -- SAMPLES.json OUT_DIR [FORCE_SAMPLES]`
+//! `cargo run -p ocm-surrogate --example build_model -- SAMPLES.json OUT_DIR [FORCE_SAMPLES [FORCE_HELD_OUT]]`
 use ocm_surrogate::constraints::Limits;
 use ocm_surrogate::fem_samples::FemSamples;
 use ocm_surrogate::mapping::MatchConfig;
@@ -23,15 +23,26 @@ fn main() {
         let b = ocm_fem::bellows::Bellows::load(mesh, ocm_fem::bellows::BellowsConfig::default())
             .expect("bellows");
         let t = std::time::Instant::now();
+        let h = a.get(3).and_then(|x| x.parse::<usize>().ok()).unwrap_or(0);
         let p = SurrogateModel::calibration_pressures(n, 2);
-        let (sur, fem) = m
-            .calibrate_force(&b, &p, &ocm_surrogate::sim::SceneConfig::default(), |k| {
-                eprintln!("jig {k}/{n}")
-            })
+        let held = ocm_surrogate::fem_samples::random_pressures(h, 3);
+        let fs = m
+            .calibrate_force(
+                &b,
+                &p,
+                &held,
+                &ocm_surrogate::sim::SceneConfig::default(),
+                ocm_surrogate::force::JigHold::TcpPinned,
+                |k| eprintln!("jig {k}/{}", p.len() + h),
+            )
             .expect("force calibration");
         eprintln!("force calibration in {:.1} s", t.elapsed().as_secs_f64());
-        for ((p, s), f) in p.iter().zip(&sur).zip(&fem) {
-            println!("P {p:?} kPa: surrogate {s:?} N, FEM {f:?} N");
+        for (i, p) in fs.pressures_kpa.iter().enumerate() {
+            let set = if i < fs.fit { "fit" } else { "held-out" };
+            println!(
+                "{set} P {p:?} kPa: surrogate {:?} N, FEM {:?} N",
+                fs.surrogate_n[i], fs.fem_n[i]
+            );
         }
         println!("{:?}", m.force_calibration);
     }

@@ -1,8 +1,10 @@
 //! A reduced-coordinate stepper for many surrogate environments at once: the chain's joint-space
-//! dynamics M(q) qdd = tau_motor + tau_gravity with position motors integrated implicitly
-//! (unconditionally stable for any gains) and joint limits, without contact. The rapier scene
-//! ([`crate::sim`]) is the model for contact tasks; this one is for throughput, and it is tested
-//! against rapier's equilibria and motions.
+//! dynamics M(q) qdd = tau_motor + tau_gravity + J^T F_contact with position motors integrated
+//! implicitly (unconditionally stable for any gains), joint limits, and contact of the TCP
+//! sensor sphere with the scene's surfaces (a frictionless penalty spring-damper along the
+//! surface normal, linearised into the implicit step, so stiff contacts stay stable). The rapier
+//! scene ([`crate::sim`]) is the general contact model (every link, friction); this one is for
+//! throughput, and it is tested against rapier's equilibria, motions and contact forces.
 //!
 //! M(q) is assembled from the bodies' Jacobians (sum of m J_v^T J_v + J_w^T I J_w, the composite
 //! inertia); the velocity-product (Coriolis and centrifugal) terms are left out: at the joint
@@ -11,7 +13,7 @@
 
 use crate::chain::{ChainGeometry, JointKind, KINDS, N_JOINTS, Posture};
 use crate::constraints::Limits;
-use crate::sim::SceneConfig;
+use crate::sim::{SceneConfig, Surface};
 use crate::{Result, SurrogateError};
 use nalgebra::{SMatrix, SVector, Vector3};
 use rayon::prelude::*;
@@ -39,6 +41,10 @@ pub struct BatchModel {
     damping: Posture,
     gravity: Vector3<f64>,
     dt: f64,
+    surfaces: Vec<Surface>,
+    sensor_radius: f64,
+    contact_k: f64,
+    contact_c: f64,
 }
 
 impl BatchModel {
@@ -50,6 +56,17 @@ impl BatchModel {
                 "time step {} s must be positive",
                 cfg.dt_s
             )));
+        }
+        for (name, v) in [
+            ("contact stiffness (N/m)", cfg.contact_stiffness_n_per_m),
+            ("contact damping (N s/m)", cfg.contact_damping_n_s_per_m),
+            ("TCP sensor radius (m)", cfg.tcp_sensor_radius_m),
+        ] {
+            if !(v >= 0.0) || !v.is_finite() {
+                return Err(SurrogateError::Invalid(format!(
+                    "{name} {v} must be finite and >= 0"
+                )));
+            }
         }
         let gain = |j: usize, rev: f64, pri: f64| match KINDS[j] {
             JointKind::Prismatic => pri,
@@ -64,10 +81,15 @@ impl BatchModel {
             damping: std::array::from_fn(|j| gain(j, cfg.revolute_damping, cfg.prismatic_damping)),
             gravity: Vector3::new(0.0, 0.0, -cfg.gravity_m_s2),
             dt: cfg.dt_s,
+            surfaces: cfg.surfaces.clone(),
+            sensor_radius: cfg.tcp_sensor_radius_m,
+            contact_k: cfg.contact_stiffness_n_per_m,
+            contact_c: cfg.contact_damping_n_s_per_m,
         })
     }
 
-    /// An environment at rest at the (projected) posture, commanding it.
+    /// An environment at rest at a posture, commanding it: a starting state, so any finite posture
+    /// is accepted and clamped onto the limits and grouped constraints ([`Limits::project`]).
     pub fn env_at(&self, q: &Posture) -> Result<EnvState> {
         let q = self.limits.project(q)?;
         Ok(EnvState {
@@ -77,8 +99,18 @@ impl BatchModel {
         })
     }
 
-    /// Sets the command of an environment, projected onto the grouped constraints.
+    /// Sets the command of an environment if it satisfies the joint limits and the grouped
+    /// constraints; otherwise [`SurrogateError::OutOfRange`] (or `NotFinite`) names the first
+    /// offending joint, its value and its allowed range, and the command is unchanged.
     pub fn command(&self, env: &mut EnvState, q: &Posture) -> Result<Posture> {
+        self.limits.check(q)?;
+        env.target = *q;
+        Ok(env.target)
+    }
+
+    /// Sets the command clamped onto the limits and grouped constraints ([`Limits::project`]);
+    /// returns it. Non-finite values are still an error.
+    pub fn command_clamped(&self, env: &mut EnvState, q: &Posture) -> Result<Posture> {
         env.target = self.limits.project(q)?;
         Ok(env.target)
     }
@@ -162,6 +194,28 @@ impl BatchModel {
             a[(j, j)] += dt * self.damping[j] + dt * dt * self.stiffness[j];
             rhs[j] += dt * self.stiffness[j] * (env.target[j] - env.q[j]);
         }
+        if !self.surfaces.is_empty() {
+            let (p, jac) = self.chain.tcp_jacobian(&env.q);
+            let v = jac * Vec11::from(env.v);
+            for s in &self.surfaces {
+                let (o, n) = s.point_and_normal();
+                let depth = self.sensor_radius - (p - o).dot(&n);
+                if depth <= 0.0 {
+                    continue;
+                }
+                // F = n (k depth - c n.v) with depth and n.v at the end of the step, depth
+                // linearised (depth1 = depth0 - dt n^T J v1): dt (k dt + c) J^T n n^T J joins
+                // the implicit matrix and dt k depth0 J^T n the right-hand side.
+                let jn = jac.transpose() * n;
+                let f0 = self.contact_k * depth - self.contact_c * n.dot(&v);
+                if f0 <= 0.0 {
+                    continue;
+                }
+                let w = dt * (self.contact_k * dt + self.contact_c);
+                a += jn * jn.transpose() * w;
+                rhs += jn * (dt * self.contact_k * depth);
+            }
+        }
         let v = match a.cholesky() {
             Some(ch) => ch.solve(&rhs),
             None => a.lu().solve(&rhs).unwrap_or_else(Vec11::zeros),
@@ -190,5 +244,24 @@ impl BatchModel {
     /// The TCP of an environment, m.
     pub fn tcp(&self, env: &EnvState) -> Vector3<f64> {
         self.chain.tcp(&env.q)
+    }
+
+    /// Force of the surroundings on the TCP sensor at the environment's state, N (the penalty
+    /// law of the step; zero without contact).
+    pub fn tcp_force(&self, env: &EnvState) -> Vector3<f64> {
+        if self.surfaces.is_empty() {
+            return Vector3::zeros();
+        }
+        let (p, jac) = self.chain.tcp_jacobian(&env.q);
+        let v = jac * Vec11::from(env.v);
+        let mut f = Vector3::zeros();
+        for s in &self.surfaces {
+            let (o, n) = s.point_and_normal();
+            let depth = self.sensor_radius - (p - o).dot(&n);
+            if depth > 0.0 {
+                f += n * (self.contact_k * depth - self.contact_c * n.dot(&v)).max(0.0);
+            }
+        }
+        f
     }
 }

@@ -1,23 +1,46 @@
 //! Throughput of the articulated simulation: environments stepped in a batch over a fixed
-//! number of threads, each with a seeded random walk of commanded postures.
+//! number of threads, each with a seeded random walk of commanded postures (clamped onto the
+//! limits with the explicit clamping API). The contact scenes put a plate 20 mm above the TCP
+//! sensor at rest, within reach of the walk; the report says how many steps touched it.
 
 use crate::batch::{BatchModel, EnvState};
 use crate::chain::{ChainGeometry, N_JOINTS, Posture};
 use crate::constraints::Limits;
 use crate::sim::{SceneConfig, Sim, Surface};
 use crate::{Result, SurrogateError};
+use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Which stepper is timed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Engine {
-    /// The reduced-coordinate batch stepper ([`crate::batch`]), no contact.
+    /// The reduced-coordinate batch stepper ([`crate::batch`]), free (no surroundings).
     Batch,
-    /// The rapier scene ([`crate::sim`]) with a plate above the TCP.
+    /// The batch stepper with the plate above the TCP (penalty contact of the TCP sensor).
+    BatchContact,
+    /// The rapier scene ([`crate::sim`]) with the plate above the TCP (every link collides).
     Rapier,
+}
+
+impl Engine {
+    /// Every engine, in the order the CLI reports them.
+    pub const ALL: [Engine; 3] = [Engine::Batch, Engine::BatchContact, Engine::Rapier];
+
+    /// Parses `batch`, `batch-contact` or `rapier`.
+    pub fn parse(s: &str) -> Result<Self> {
+        match s {
+            "batch" => Ok(Engine::Batch),
+            "batch-contact" => Ok(Engine::BatchContact),
+            "rapier" => Ok(Engine::Rapier),
+            e => Err(SurrogateError::Invalid(format!(
+                "unknown engine {e:?} (batch, batch-contact or rapier)"
+            ))),
+        }
+    }
 }
 
 /// Benchmark settings.
@@ -48,13 +71,17 @@ pub struct BenchReport {
     pub steps_per_s_median: f64,
     /// Every repeat's steps per second.
     pub steps_per_s: Vec<f64>,
+    /// Fraction of the timed steps whose TCP sensor touched the plate (0 for the free scene).
+    #[serde(default)]
+    pub contact_fraction: f64,
 }
 
 /// Times the configured engine.
 pub fn run(chain: &ChainGeometry, limits: &Limits, cfg: &BenchConfig) -> Result<BenchReport> {
     match cfg.engine {
         Engine::Rapier => run_rapier(chain, limits, cfg),
-        Engine::Batch => run_batch(chain, limits, cfg),
+        Engine::Batch => run_batch(chain, limits, cfg, false),
+        Engine::BatchContact => run_batch(chain, limits, cfg, true),
     }
 }
 
@@ -70,7 +97,14 @@ fn check(cfg: &BenchConfig) -> Result<rayon::ThreadPool> {
         .map_err(|e| SurrogateError::Solver(format!("thread pool: {e}")))
 }
 
-fn report(cfg: &BenchConfig, engine: &str, rates: Vec<f64>) -> BenchReport {
+/// The plate of the contact scenes: 20 mm above the TCP sensor's top at rest.
+fn plate(chain: &ChainGeometry, cfg: &SceneConfig) -> Surface {
+    Surface::Plane {
+        height_m: chain.tcp(&[0.0; N_JOINTS]).z + cfg.tcp_sensor_radius_m + 0.02,
+    }
+}
+
+fn report(cfg: &BenchConfig, engine: &str, rates: Vec<f64>, touched: usize) -> BenchReport {
     let mut sorted = rates.clone();
     sorted.sort_by(f64::total_cmp);
     BenchReport {
@@ -78,14 +112,24 @@ fn report(cfg: &BenchConfig, engine: &str, rates: Vec<f64>) -> BenchReport {
         engine: engine.into(),
         steps_per_s_median: sorted[sorted.len() / 2],
         steps_per_s: rates,
+        contact_fraction: touched as f64 / (cfg.envs * cfg.steps * cfg.repeats) as f64,
     }
 }
 
-/// Steps `envs` batch environments (gravity, implicit position motors, limits, a new projected
-/// command every step), split over `threads` threads in chunks.
-fn run_batch(chain: &ChainGeometry, limits: &Limits, cfg: &BenchConfig) -> Result<BenchReport> {
+/// Steps `envs` batch environments (gravity, implicit position motors, limits, a new clamped
+/// command every step, the plate when `contact`), split over `threads` threads in chunks.
+fn run_batch(
+    chain: &ChainGeometry,
+    limits: &Limits,
+    cfg: &BenchConfig,
+    contact: bool,
+) -> Result<BenchReport> {
     let pool = check(cfg)?;
-    let model = BatchModel::new(chain, limits, &SceneConfig::default())?;
+    let mut scene = SceneConfig::default();
+    if contact {
+        scene.surfaces = vec![plate(chain, &scene)];
+    }
+    let model = BatchModel::new(chain, limits, &scene)?;
     let mut envs: Vec<(EnvState, rand_chacha::ChaCha8Rng, Posture)> = (0..cfg.envs)
         .map(|k| {
             Ok((
@@ -97,41 +141,48 @@ fn run_batch(chain: &ChainGeometry, limits: &Limits, cfg: &BenchConfig) -> Resul
         .collect::<Result<_>>()?;
     let chunk = cfg.envs.div_ceil(cfg.threads);
     let mut rates = Vec::with_capacity(cfg.repeats);
+    let touched = AtomicUsize::new(0);
     for _ in 0..cfg.repeats {
         let t = std::time::Instant::now();
         pool.install(|| {
             envs.par_chunks_mut(chunk).for_each(|part| {
+                let mut hits = 0;
                 for _ in 0..cfg.steps {
                     for (env, rng, q) in part.iter_mut() {
                         for v in q.iter_mut() {
                             *v += rng.random_range(-0.005..0.005);
                         }
-                        if let Ok(applied) = model.command(env, q) {
+                        if let Ok(applied) = model.command_clamped(env, q) {
                             *q = applied;
                         }
                         model.step(env);
+                        if contact && model.tcp_force(env) != Vector3::zeros() {
+                            hits += 1;
+                        }
                     }
                 }
+                touched.fetch_add(hits, Ordering::Relaxed);
             })
         });
         rates.push((cfg.envs * cfg.steps) as f64 / t.elapsed().as_secs_f64());
     }
-    Ok(report(
-        cfg,
-        "batch (reduced coordinates, no contact)",
-        rates,
-    ))
+    let name = if contact {
+        "batch with a plate (reduced coordinates, TCP penalty contact)"
+    } else {
+        "batch free (reduced coordinates, no surroundings)"
+    };
+    Ok(report(cfg, name, rates, touched.into_inner()))
 }
 
 /// Steps `envs` rapier scenes (gravity, a plate 20 mm above the TCP at rest, position motors, a new
 /// projected command every step) on `threads` threads.
 fn run_rapier(chain: &ChainGeometry, limits: &Limits, cfg: &BenchConfig) -> Result<BenchReport> {
     let pool = check(cfg)?;
-    let ceiling = chain.tcp(&[0.0; N_JOINTS]).z + 0.02;
+    let surface = plate(chain, &SceneConfig::default());
     let mut envs: Vec<(Sim, rand_chacha::ChaCha8Rng, Posture)> = (0..cfg.envs)
         .map(|k| {
             let scene = SceneConfig {
-                surfaces: vec![Surface::Plane { height_m: ceiling }],
+                surfaces: vec![surface],
                 ..SceneConfig::default()
             };
             Ok((
@@ -142,22 +193,33 @@ fn run_rapier(chain: &ChainGeometry, limits: &Limits, cfg: &BenchConfig) -> Resu
         })
         .collect::<Result<_>>()?;
     let mut rates = Vec::with_capacity(cfg.repeats);
+    let touched = AtomicUsize::new(0);
     for _ in 0..cfg.repeats {
         let t = std::time::Instant::now();
         pool.install(|| {
             envs.par_iter_mut().for_each(|(sim, rng, q)| {
+                let mut hits = 0;
                 for _ in 0..cfg.steps {
                     for v in q.iter_mut() {
                         *v += rng.random_range(-0.005..0.005);
                     }
-                    if let Ok(applied) = sim.command(q) {
+                    if let Ok(applied) = sim.command_clamped(q) {
                         *q = applied;
                     }
                     sim.step();
+                    if sim.tcp_force() != Vector3::zeros() {
+                        hits += 1;
+                    }
                 }
+                touched.fetch_add(hits, Ordering::Relaxed);
             })
         });
         rates.push((cfg.envs * cfg.steps) as f64 / t.elapsed().as_secs_f64());
     }
-    Ok(report(cfg, "rapier3d-f64 multibody with contact", rates))
+    Ok(report(
+        cfg,
+        "rapier3d-f64 multibody with a plate (rigid contact, every link)",
+        rates,
+        touched.into_inner(),
+    ))
 }

@@ -205,6 +205,18 @@ impl ChainGeometry {
     }
 }
 
+/// Joint names in chain order, as the URDF and error messages write them.
+pub fn joint_names() -> [String; N_JOINTS] {
+    std::array::from_fn(|j| {
+        let pair = j / 3 + 1;
+        match KINDS[j] {
+            JointKind::RevoluteX => format!("x{pair}"),
+            JointKind::RevoluteY => format!("y{pair}"),
+            JointKind::Prismatic => format!("d{pair}"),
+        }
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

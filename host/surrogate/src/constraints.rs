@@ -40,6 +40,15 @@ impl Default for Limits {
 /// Round-off allowed when checking a posture, in the joint's unit.
 const TOL: f64 = 1e-12;
 
+/// The name of joint `j` in errors: its index, URDF name and kind, e.g. `joint 4 (y2, theta_y)`.
+pub fn joint_channel(j: usize) -> String {
+    format!(
+        "joint {j} ({}, {})",
+        crate::chain::joint_names()[j],
+        KINDS[j].name()
+    )
+}
+
 impl Limits {
     /// The absolute range of joint `j`.
     pub fn range(&self, j: usize) -> [f64; 2] {
@@ -74,57 +83,57 @@ impl Limits {
         Ok(())
     }
 
-    /// Errors naming the first joint that is non-finite, out of range, or too far from its
-    /// group neighbour.
+    /// Errors naming the first joint that is non-finite ([`SurrogateError::NotFinite`]), out of
+    /// its range, or farther than delta from the joint below it in its group (eq 4.23; both
+    /// [`SurrogateError::OutOfRange`], with the range it had to lie in).
     pub fn check(&self, q: &Posture) -> Result<()> {
         for j in 0..N_JOINTS {
-            let [lo, hi] = self.range(j);
-            if !q[j].is_finite() {
-                return Err(SurrogateError::Invalid(format!(
-                    "joint {} ({}) is not finite: {}",
-                    j,
-                    KINDS[j].name(),
-                    q[j]
-                )));
-            }
-            if q[j] < lo - TOL || q[j] > hi + TOL {
-                return Err(SurrogateError::Invalid(format!(
-                    "joint {} ({}) = {} outside [{lo}, {hi}] {}",
-                    j,
-                    KINDS[j].name(),
-                    q[j],
-                    KINDS[j].unit()
-                )));
-            }
+            SurrogateError::check_value(
+                || joint_channel(j),
+                q[j],
+                self.range(j),
+                TOL,
+                KINDS[j].unit(),
+            )?;
         }
         for (g, members) in GROUPS.iter().enumerate() {
             for w in members.windows(2) {
-                let diff = (q[w[1]] - q[w[0]]).abs();
-                if diff > self.delta(g) + TOL {
-                    return Err(SurrogateError::Invalid(format!(
-                        "joints {} and {} ({}) differ by {diff:.6} > {} {} (eq 4.23)",
-                        w[0],
-                        w[1],
-                        KINDS[w[0]].name(),
-                        self.delta(g),
-                        KINDS[w[0]].unit()
-                    )));
-                }
+                let (below, d) = (q[w[0]], self.delta(g));
+                SurrogateError::check_value(
+                    || {
+                        format!(
+                            "{} within {d} {} of {} (eq 4.23)",
+                            joint_channel(w[1]),
+                            KINDS[w[1]].unit(),
+                            joint_channel(w[0])
+                        )
+                    },
+                    q[w[1]],
+                    {
+                        let [lo, hi] = self.range(w[1]);
+                        [lo.max(below - d), hi.min(below + d)]
+                    },
+                    TOL,
+                    KINDS[w[1]].unit(),
+                )?;
             }
         }
         Ok(())
     }
 
-    /// A feasible posture near `q`: each group from the base up, every joint clamped to its range
-    /// and to within delta of the joint below (already feasible postures are unchanged).
-    /// Non-finite commands are an error, not clamped.
+    /// Clamps any finite posture onto the feasible set: each group from the base up, every joint
+    /// clamped to its range and to within delta of the joint below (feasible postures are
+    /// unchanged). This is the explicit clamping API; the simulations' `command` rejects
+    /// infeasible commands instead. Non-finite values are an error, not clamped.
     pub fn project(&self, q: &Posture) -> Result<Posture> {
-        if let Some(j) = q.iter().position(|v| !v.is_finite()) {
-            return Err(SurrogateError::Invalid(format!(
-                "command for joint {j} ({}) is not finite: {}",
-                KINDS[j].name(),
-                q[j]
-            )));
+        for j in 0..N_JOINTS {
+            SurrogateError::check_value(
+                || joint_channel(j),
+                q[j],
+                self.range(j),
+                f64::INFINITY,
+                KINDS[j].unit(),
+            )?;
         }
         let mut out = *q;
         for (g, members) in GROUPS.iter().enumerate() {

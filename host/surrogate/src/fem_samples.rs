@@ -321,6 +321,21 @@ impl FemSamples {
 /// The lab's working pressure range, kPa (issue 12; the FEM accepts -20..35 kPa).
 pub const PRESSURE_RANGE_KPA: [f64; 2] = [-20.0, 35.0];
 
+/// Errors unless every chamber pressure (kPa) is finite and inside [`PRESSURE_RANGE_KPA`]; the
+/// error names the chamber, the value and the range.
+pub fn check_pressures_kpa(p_kpa: &[f64; 3]) -> Result<()> {
+    for (k, &p) in p_kpa.iter().enumerate() {
+        SurrogateError::check_value(
+            || format!("chamber {} pressure", k + 1),
+            p,
+            PRESSURE_RANGE_KPA,
+            0.0,
+            "kPa",
+        )?;
+    }
+    Ok(())
+}
+
 /// A serpentine grid of `levels` equally spaced pressures per chamber over [`PRESSURE_RANGE_KPA`].
 pub fn pressure_grid(levels: usize) -> Vec<[f64; 3]> {
     let [lo, hi] = PRESSURE_RANGE_KPA;

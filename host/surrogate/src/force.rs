@@ -1,47 +1,111 @@
-//! Force calibration (Ch.4.8.3): both models hold the TCP on a fixed jig at its rest position
-//! while the actuation is applied; a component-wise linear fit maps the surrogate's TCP force to
-//! the FEM's and is stored with the model.
+//! Force calibration (Ch.4.8.3): the robot pushes on a fixed jig at its rest pose while the
+//! actuation is applied; a component-wise linear fit maps the surrogate's TCP force to the FEM's
+//! and is stored with the model.
 //!
-//! FEM jig: the tip force F (a dead load shared by the top-face nodes, as in `ocm-mor`) that
-//! brings the TCP back to its rest position under the chamber pressures, found by Broyden's
-//! method from a finite-difference compliance; the robot pushes on the jig with -F. Surrogate jig:
-//! the static equilibrium of the position motors (stiffness K, command f_SP(P)) with the TCP
-//! pinned, K (q - q*) = J^T F, tcp(q) = x0 (gravity off, as in the FEM); the robot pushes with -F.
+//! FEM jig: the rigid top frame's nodes are clamped at rest (the load cell of Fig 4.13 fixes the
+//! end effector) and the chamber pressures applied; the robot's force on the jig is the reaction
+//! of those nodes. A clamp keeps the static problem well posed at every pressure, so the whole
+//! range -20..35 kPa solves (a dead tip load that only holds the TCP point lets the pressurised
+//! bellows buckle about it towards the ends of the range). Surrogate jig: the static equilibrium
+//! of the position motors (stiffness K, command f_SP(P), gravity off as in the FEM) with the TCP
+//! held, K (q - q*) = C^T lambda; the first three multipliers are the jig's force on the robot.
+//! The calibration holds the surrogate by its TCP point ([`JigHold::TcpPinned`], how its TCP
+//! sensor meets the world); the README gives the fit with the plate clamped as well.
 
-use crate::chain::{ChainGeometry, N_JOINTS, Posture};
+use crate::chain::{ChainGeometry, JointKind, KINDS, N_JOINTS, Posture};
 use crate::{Result, SurrogateError};
-use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use nalgebra::{DMatrix, DVector, SMatrix, Vector3};
 use ocm_fem::bellows::Bellows;
+use ocm_fem::model::State;
 use ocm_fem::solve::statics::StaticSolver;
 use serde::{Deserialize, Serialize};
 
-/// The surrogate held at `x0` by its TCP with motors of stiffness `stiffness` commanded to
-/// `target`: the equilibrium posture and the force of the robot on the jig, N. (The jig's force
-/// on the robot is the derivative of the motors' least energy over TCP-preserving postures with
-/// respect to the jig position.)
+/// How the surrogate is held on the jig.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum JigHold {
+    /// The TCP point is held; the plate may turn (a point sensor, like the scene's TCP sphere).
+    #[default]
+    TcpPinned,
+    /// The TCP is held and the plate kept level (the rest orientation; the chain has no joint
+    /// about the plate normal, so these five constraints fix the plate).
+    PlateClamped,
+}
+
+impl JigHold {
+    fn constraints(self) -> usize {
+        match self {
+            JigHold::TcpPinned => 3,
+            JigHold::PlateClamped => 5,
+        }
+    }
+}
+
+/// The surrogate with its TCP pinned at `x0` ([`JigHold::TcpPinned`], the hold the force
+/// calibration uses): see [`surrogate_jig_held`].
 pub fn surrogate_jig(
     chain: &ChainGeometry,
     stiffness: &Posture,
     target: &Posture,
     x0: &Vector3<f64>,
 ) -> Result<(Posture, Vector3<f64>)> {
+    surrogate_jig_held(chain, stiffness, target, x0, JigHold::TcpPinned)
+}
+
+/// The surrogate held on the jig at `x0` as `hold` says, motors of stiffness `stiffness`
+/// commanded to `target`: the equilibrium posture and the force of the robot on the jig, N.
+/// (The jig's force on the robot is the derivative of the motors' least energy over held
+/// postures with respect to the jig position.)
+pub fn surrogate_jig_held(
+    chain: &ChainGeometry,
+    stiffness: &Posture,
+    target: &Posture,
+    x0: &Vector3<f64>,
+    hold: JigHold,
+) -> Result<(Posture, Vector3<f64>)> {
+    const NC: usize = 5;
+    let nc = hold.constraints();
     let mut q = [0.0; N_JOINTS];
-    let n = N_JOINTS + 3;
+    let n = N_JOINTS + nc;
     for _ in 0..50 {
-        let (tcp, jac) = chain.tcp_jacobian(&q);
+        let (frames, tcp) = chain.joint_frames(&q);
+        let (_, jac) = chain.tcp_jacobian(&q);
+        let normal = tcp.r.column(2).into_owned();
+        // Rows: TCP x, y, z; plate normal x, y. A rotation about the world axis a turns the
+        // normal by a x n; extensions do not turn it.
+        let mut cj = SMatrix::<f64, NC, N_JOINTS>::zeros();
+        for j in 0..N_JOINTS {
+            let turn = match KINDS[j] {
+                JointKind::RevoluteX => frames[j].r.column(0).cross(&normal),
+                JointKind::RevoluteY => frames[j].r.column(1).cross(&normal),
+                JointKind::Prismatic => Vector3::zeros(),
+            };
+            for k in 0..3 {
+                cj[(k, j)] = jac[(k, j)];
+            }
+            cj[(3, j)] = turn.x;
+            cj[(4, j)] = turn.y;
+        }
+        let c = [
+            tcp.p.x - x0.x,
+            tcp.p.y - x0.y,
+            tcp.p.z - x0.z,
+            normal.x,
+            normal.y,
+        ];
         let mut a = DMatrix::zeros(n, n);
         let mut rhs = DVector::zeros(n);
         for j in 0..N_JOINTS {
             a[(j, j)] = stiffness[j];
             rhs[j] = -stiffness[j] * (q[j] - target[j]);
-            for k in 0..3 {
-                a[(j, N_JOINTS + k)] = -jac[(k, j)];
-                a[(N_JOINTS + k, j)] = jac[(k, j)];
+            for k in 0..nc {
+                a[(j, N_JOINTS + k)] = -cj[(k, j)];
+                a[(N_JOINTS + k, j)] = cj[(k, j)];
             }
         }
-        // The multiplier is solved for as a whole (not as an increment) each iteration.
-        for k in 0..3 {
-            rhs[N_JOINTS + k] = x0[k] - tcp[k];
+        // The multipliers are solved for as a whole (not as increments) each iteration.
+        for k in 0..nc {
+            rhs[N_JOINTS + k] = -c[k];
         }
         let sol = a
             .lu()
@@ -52,7 +116,13 @@ pub fn surrogate_jig(
             q[j] += sol[j];
         }
         let f = Vector3::new(sol[N_JOINTS], sol[N_JOINTS + 1], sol[N_JOINTS + 2]);
-        if step < 1e-13 && (chain.tcp(&q) - x0).norm() < 1e-12 {
+        let (_, tcp) = chain.joint_frames(&q);
+        let tilt = match hold {
+            JigHold::TcpPinned => 0.0,
+            JigHold::PlateClamped => tcp.r[(0, 2)].abs() + tcp.r[(1, 2)].abs(),
+        };
+        let off = (tcp.p - x0).norm() + tilt;
+        if step < 1e-13 && off < 1e-12 {
             return Ok((q, -f));
         }
     }
@@ -61,65 +131,49 @@ pub fn surrogate_jig(
     ))
 }
 
-/// Force of the FEM robot on the jig, N, at chamber pressures in kPa; `x0` is the rest TCP.
-pub fn fem_jig_force(
+/// Forces of the FEM robot on a jig that clamps its rigid top frame at rest, N, one per pressure
+/// triple (kPa, solved in order, each continued from the previous equilibrium; a state that does
+/// not follow is solved again from rest in load steps). The jig's force is the reaction of the
+/// clamped top-frame nodes, the sum of f_ext - f_int over them. `on_point` counts finished states.
+pub fn fem_clamped_jig_forces(
     b: &Bellows,
-    pressures_kpa: &[f64; 3],
-    x0: &Vector3<f64>,
-) -> Result<Vector3<f64>> {
-    let mut bb = b.clone();
-    let mut solver = StaticSolver::new(&bb.model)?;
-    // Tip loads of a few newtons buckle the path from rest in one step: load-step it.
-    solver.load_steps = 4;
-    let mut tcp_at = |f: &Vector3<f64>| -> Result<Vector3<f64>> {
-        bb.model.point_forces = tip_forces(&bb.top_face, f);
-        let (st, _) = bb.solve_kpa(&mut solver, pressures_kpa)?;
-        Ok(Vector3::from(bb.state_of(&st).tcp_m))
-    };
-    let mut f = Vector3::zeros();
-    let mut r = tcp_at(&f)? - x0;
-    // Compliance by finite differences (0.5 N), then Broyden updates of its inverse.
-    let h = 0.5;
-    let mut c = Matrix3::zeros();
-    for k in 0..3 {
-        let mut e = Vector3::zeros();
-        e[k] = h;
-        c.set_column(k, &((tcp_at(&e)? - x0 - r) / h));
+    pressures_kpa: &[[f64; 3]],
+    mut on_point: impl FnMut(usize),
+) -> Result<Vec<Vector3<f64>>> {
+    let mut model = b.model.clone();
+    let zt = b.config.rigid_top_above_mm * 1e-3;
+    let clamped = model.fix_nodes(|p| p.z >= zt);
+    if clamped == 0 {
+        return Err(SurrogateError::Invalid(
+            "FEM jig: no top-frame node to clamp".into(),
+        ));
     }
-    let mut c_inv = c
-        .try_inverse()
-        .ok_or_else(|| SurrogateError::Solver("FEM jig: singular compliance".into()))?;
-    for _ in 0..30 {
-        if r.norm() < 1e-6 {
-            return Ok(-f);
+    let top: Vec<usize> = (0..model.num_nodes())
+        .filter(|&i| model.rest[i].z >= zt)
+        .collect();
+    let mut solver = StaticSolver::new(&model)?;
+    let mut state = State::at_rest(&model);
+    let mut prev = b.loads_kpa(&[0.0; 3]);
+    let mut out = Vec::with_capacity(pressures_kpa.len());
+    for (k, p) in pressures_kpa.iter().enumerate() {
+        crate::fem_samples::check_pressures_kpa(p)?;
+        let to = b.loads_kpa(p);
+        if solver.continue_to(&model, &mut state, &prev, &to).is_err() {
+            state = State::at_rest(&model);
+            solver.load_steps = 8;
+            let r = solver.continue_to(&model, &mut state, &b.loads_kpa(&[0.0; 3]), &to);
+            solver.load_steps = 1;
+            r.map_err(|e| {
+                SurrogateError::Solver(format!("FEM jig at {p:?} kPa (state {k}): {e}"))
+            })?;
         }
-        let mut df = -(c_inv * r);
-        // Trust region of 2 N per step: the compliance stiffens far from rest.
-        if df.norm() > 2.0 {
-            df *= 2.0 / df.norm();
-        }
-        f += df;
-        let r_new = tcp_at(&f)? - x0;
-        let dr = r_new - r;
-        let denom = df.dot(&(c_inv * dr));
-        if denom.abs() > 1e-30 {
-            c_inv += (df - c_inv * dr) * (df.transpose() * c_inv) / denom;
-        }
-        r = r_new;
+        prev = to.clone();
+        let ev = model.evaluate(&solver.pattern, &state.x, &to, 1.0, false)?;
+        let net = |i: usize| Vector3::from_fn(|d, _| ev.f_ext[3 * i + d] - ev.f_int[3 * i + d]);
+        out.push(top.iter().map(|&i| net(i)).sum());
+        on_point(k + 1);
     }
-    if r.norm() < 1e-6 {
-        Ok(-f)
-    } else {
-        Err(SurrogateError::Solver(format!(
-            "FEM jig at {pressures_kpa:?} kPa: TCP still {:.3} mm off after 30 Broyden steps",
-            r.norm() * 1e3
-        )))
-    }
-}
-
-fn tip_forces(top_face: &[usize], f: &Vector3<f64>) -> Vec<(usize, Vector3<f64>)> {
-    let share = f / top_face.len().max(1) as f64;
-    top_face.iter().map(|&i| (i, share)).collect()
+    Ok(out)
 }
 
 /// Component-wise linear map F_fem,k = slope_k F_sur,k + offset_k.
@@ -129,10 +183,22 @@ pub struct ForceCalibration {
     pub slope: [f64; 3],
     /// Offsets per component, N.
     pub offset_n: [f64; 3],
-    /// RMSE of the fit per component, N.
+    /// RMSE of the fit per component on the fit samples, N.
     pub rmse_n: [f64; 3],
+    /// Coefficient of determination of the fit per component on the fit samples.
+    #[serde(default)]
+    pub r2: [f64; 3],
     /// Calibration samples.
     pub samples: usize,
+    /// RMSE per component on held-out samples (not used to fit), N; zero when there are none.
+    #[serde(default)]
+    pub held_out_rmse_n: [f64; 3],
+    /// Held-out samples.
+    #[serde(default)]
+    pub held_out_samples: usize,
+    /// How the surrogate was held on the jig.
+    #[serde(default)]
+    pub surrogate_hold: JigHold,
 }
 
 impl ForceCalibration {
@@ -146,7 +212,7 @@ impl ForceCalibration {
             )));
         }
         let n = surrogate_n.len() as f64;
-        let (mut slope, mut offset, mut rmse) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+        let (mut slope, mut offset, mut rmse, mut r2) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
         for k in 0..3 {
             let mx = surrogate_n.iter().map(|f| f[k]).sum::<f64>() / n;
             let my = fem_n.iter().map(|f| f[k]).sum::<f64>() / n;
@@ -170,13 +236,47 @@ impl ForceCalibration {
                 .sum::<f64>()
                 / n)
                 .sqrt();
+            let syy: f64 = fem_n.iter().map(|f| (f[k] - my).powi(2)).sum();
+            r2[k] = if syy > 0.0 {
+                1.0 - n * rmse[k] * rmse[k] / syy
+            } else {
+                1.0
+            };
         }
         Ok(ForceCalibration {
             slope,
             offset_n: offset,
             rmse_n: rmse,
+            r2,
             samples: surrogate_n.len(),
+            held_out_rmse_n: [0.0; 3],
+            held_out_samples: 0,
+            surrogate_hold: JigHold::TcpPinned,
         })
+    }
+
+    /// RMSE per component of the calibrated surrogate force against reference forces, N.
+    pub fn rmse_on(&self, surrogate_n: &[[f64; 3]], reference_n: &[[f64; 3]]) -> [f64; 3] {
+        let n = surrogate_n.len().min(reference_n.len()).max(1) as f64;
+        std::array::from_fn(|k| {
+            (surrogate_n
+                .iter()
+                .zip(reference_n)
+                .map(|(a, b)| (self.slope[k] * a[k] + self.offset_n[k] - b[k]).powi(2))
+                .sum::<f64>()
+                / n)
+                .sqrt()
+        })
+    }
+
+    /// Records the RMSE on held-out pairs.
+    pub fn set_held_out(&mut self, surrogate_n: &[[f64; 3]], reference_n: &[[f64; 3]]) {
+        self.held_out_samples = surrogate_n.len().min(reference_n.len());
+        self.held_out_rmse_n = if self.held_out_samples == 0 {
+            [0.0; 3]
+        } else {
+            self.rmse_on(surrogate_n, reference_n)
+        };
     }
 
     /// The calibrated (FEM-equivalent) force of a surrogate TCP force, N.
@@ -204,8 +304,26 @@ mod tests {
         let c = ForceCalibration::fit(&sur, &fem).unwrap();
         for (k, (s, o)) in [(2.0, 0.1), (-0.5, 1.0), (3.0, 0.0)].iter().enumerate() {
             assert!((c.slope[k] - s).abs() < 1e-12 && (c.offset_n[k] - o).abs() < 1e-12);
-            assert!(c.rmse_n[k] < 1e-12);
+            assert!(c.rmse_n[k] < 1e-12 && (c.r2[k] - 1.0).abs() < 1e-12);
         }
+        // Held-out pairs whose reference is off by 0.3 N in x only.
+        let mut c = c;
+        let shifted: Vec<[f64; 3]> = fem.iter().map(|f| [f[0] + 0.3, f[1], f[2]]).collect();
+        c.set_held_out(&sur, &shifted);
+        assert_eq!(c.held_out_samples, sur.len());
+        assert!((c.held_out_rmse_n[0] - 0.3).abs() < 1e-12);
+        assert!(c.held_out_rmse_n[1] < 1e-12 && c.held_out_rmse_n[2] < 1e-12);
+        // Noise that the line cannot follow lowers R^2 below one.
+        let noisy: Vec<[f64; 3]> = fem
+            .iter()
+            .enumerate()
+            .map(|(i, f)| [f[0] + if i % 2 == 0 { 0.5 } else { -0.5 }, f[1], f[2]])
+            .collect();
+        let n = ForceCalibration::fit(&sur, &noisy).unwrap();
+        assert!(
+            n.r2[0] < 0.99 && n.r2[0] > 0.0 && n.rmse_n[0] > 0.4,
+            "{n:?}"
+        );
         let v = c.apply(&Vector3::new(1.0, 2.0, 3.0));
         assert!((v - Vector3::new(2.1, 0.0, 9.0)).norm() < 1e-12);
         assert!(ForceCalibration::fit(&sur[..1], &fem[..1]).is_err());
@@ -228,32 +346,39 @@ mod tests {
         };
         let k: Posture = std::array::from_fn(|j| if j % 3 == 2 { 5000.0 } else { 50.0 });
         let x0 = g.tcp(&[0.0; N_JOINTS]);
-        let (_, zero) = surrogate_jig(&g, &k, &[0.0; N_JOINTS], &x0).unwrap();
-        assert!(zero.norm() < 1e-9);
         let target: Posture = [
-            0.05, -0.03, 0.004, 0.05, -0.03, 0.004, 0.05, -0.03, 0.004, 0.05, -0.03,
+            0.05, -0.03, 0.004, 0.06, -0.035, 0.004, 0.07, -0.03, 0.003, 0.065, -0.025,
         ];
-        let (q, f) = surrogate_jig(&g, &k, &target, &x0).unwrap();
-        assert!((g.tcp(&q) - x0).norm() < 1e-12);
-        // The jig's force on the robot (-f) is the gradient of the least motor energy with
-        // respect to the jig position: check it by central differences.
-        let energy = |x: &Vector3<f64>| {
-            let (q, _) = surrogate_jig(&g, &k, &target, x).unwrap();
-            (0..N_JOINTS)
-                .map(|j| 0.5 * k[j] * (q[j] - target[j]).powi(2))
-                .sum::<f64>()
-        };
-        let h = 1e-6;
-        for a in 0..3 {
-            let mut dx = Vector3::zeros();
-            dx[a] = h;
-            let de = (energy(&(x0 + dx)) - energy(&(x0 - dx))) / (2.0 * h);
-            assert!(
-                (de + f[a]).abs() < 1e-4 * (1.0 + f.norm()),
-                "axis {a}: {de} vs {}",
-                -f[a]
-            );
+        for hold in [JigHold::TcpPinned, JigHold::PlateClamped] {
+            let (_, zero) = surrogate_jig_held(&g, &k, &[0.0; N_JOINTS], &x0, hold).unwrap();
+            assert!(zero.norm() < 1e-9);
+            let (q, f) = surrogate_jig_held(&g, &k, &target, &x0, hold).unwrap();
+            let (_, plate) = g.joint_frames(&q);
+            assert!((plate.p - x0).norm() < 1e-12);
+            if hold == JigHold::PlateClamped {
+                assert!(plate.r[(0, 2)].abs() + plate.r[(1, 2)].abs() < 1e-12);
+            }
+            // The jig's force on the robot (-f) is the gradient of the least motor energy with
+            // respect to the jig position: check it by central differences.
+            let energy = |x: &Vector3<f64>| {
+                let (q, _) = surrogate_jig_held(&g, &k, &target, x, hold).unwrap();
+                (0..N_JOINTS)
+                    .map(|j| 0.5 * k[j] * (q[j] - target[j]).powi(2))
+                    .sum::<f64>()
+            };
+            let h = 1e-6;
+            for a in 0..3 {
+                let mut dx = Vector3::zeros();
+                dx[a] = h;
+                let de = (energy(&(x0 + dx)) - energy(&(x0 - dx))) / (2.0 * h);
+                assert!(
+                    (de + f[a]).abs() < 1e-4 * (1.0 + f.norm()),
+                    "{hold:?} axis {a}: {de} vs {}",
+                    -f[a]
+                );
+            }
         }
+        let (_, f) = surrogate_jig(&g, &k, &target, &x0).unwrap();
         // The motors push the TCP where the free chain would go: the robot's force on the jig
         // points from x0 towards tcp(q*).
         let free = g.tcp(&target) - x0;

@@ -278,9 +278,11 @@ impl ActuationMap {
         self.regressor.as_deref().map_or("rbf", |r| r.name())
     }
 
-    /// f_SP: the feasible posture for chamber pressures in kPa (-20..35).
+    /// f_SP: the feasible posture for chamber pressures in kPa (-20..35; others are an
+    /// [`crate::SurrogateError::OutOfRange`] naming the chamber). The regression's output is
+    /// projected onto the grouped constraints.
     pub fn posture(&self, pressures_kpa: &[f64; 3]) -> Result<Posture> {
-        ocm_fem::bellows::check_pressures(pressures_kpa)?;
+        crate::fem_samples::check_pressures_kpa(pressures_kpa)?;
         let q: Posture = match &self.regressor {
             Some(r) => r.posture(pressures_kpa)?,
             None => {
@@ -394,5 +396,46 @@ mod tests {
         for j in 0..N_JOINTS {
             assert!((a[j] - b[j]).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn pressures_and_postures_outside_their_ranges_are_typed_errors() {
+        let map = interpolant_map();
+        for (p, chamber, value) in [
+            ([50.0, 0.0, 0.0], 1, 50.0),
+            ([0.0, -20.5, 0.0], 2, -20.5),
+            ([0.0, 0.0, 35.01], 3, 35.01),
+        ] {
+            match map.posture(&p).unwrap_err() {
+                crate::SurrogateError::OutOfRange {
+                    channel,
+                    value: v,
+                    lo,
+                    hi,
+                    unit,
+                } => {
+                    assert_eq!(channel, format!("chamber {chamber} pressure"));
+                    assert_eq!((v, lo, hi, unit), (value, -20.0, 35.0, "kPa"));
+                }
+                e => panic!("{e}"),
+            }
+        }
+        let e = map.posture(&[0.0, f64::NAN, 0.0]).unwrap_err();
+        assert!(
+            matches!(e, crate::SurrogateError::NotFinite { .. })
+                && e.to_string()
+                    .starts_with("chamber 2 pressure is not finite"),
+            "{e}"
+        );
+        // The ends of the range are allowed.
+        map.posture(&[-20.0, 35.0, 0.0]).unwrap();
+        // The inverse refuses postures outside the limits, naming the joint.
+        let mut q = [0.0; N_JOINTS];
+        q[1] = -0.3;
+        let e = map.pressures(&q).unwrap_err().to_string();
+        assert!(
+            e.contains("joint 1 (y1, theta_y) = -0.3 rad") && e.contains("[-0.2, 0.2] rad"),
+            "{e}"
+        );
     }
 }

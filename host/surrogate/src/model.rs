@@ -14,8 +14,18 @@ use serde::{Deserialize, Serialize};
 /// Format tag of the model file.
 pub const FORMAT: &str = "ocm-surrogate-model/1";
 
-/// Surrogate and FEM jig forces per calibration pressure, N.
-pub type ForcePairs = (Vec<[f64; 3]>, Vec<[f64; 3]>);
+/// Jig forces of both models per calibration pressure.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ForceSamples {
+    /// Chamber pressures, kPa: the fit set, then the held-out set.
+    pub pressures_kpa: Vec<[f64; 3]>,
+    /// Force of the surrogate on the jig, N.
+    pub surrogate_n: Vec<[f64; 3]>,
+    /// Force of the FEM on the jig, N.
+    pub fem_n: Vec<[f64; 3]>,
+    /// How many leading entries form the fit set.
+    pub fit: usize,
+}
 
 /// Errors of the mapping over a set of samples.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
@@ -143,45 +153,62 @@ impl SurrogateModel {
         })
     }
 
-    /// Calibration pressures: `n` seeded random triples in -10..10 kPa (the FEM jig's tip load
-    /// grows past what its load stepping follows near the ends of -20..35 kPa).
+    /// Calibration pressures over the whole actuation range -20..35 kPa: the eight corners of
+    /// the pressure box followed by `n` seeded uniformly random triples.
     pub fn calibration_pressures(n: usize, seed: u64) -> Vec<[f64; 3]> {
-        crate::fem_samples::random_pressures(n, seed)
-            .iter()
-            .map(|p| p.map(|v| -10.0 + (v + 20.0) * 20.0 / 55.0))
+        let [lo, hi] = crate::fem_samples::PRESSURE_RANGE_KPA;
+        let corners =
+            (0..8).map(|c: usize| [0, 1, 2].map(|k| if c >> k & 1 == 1 { hi } else { lo }));
+        corners
+            .chain(crate::fem_samples::random_pressures(n, seed))
             .collect()
     }
 
-    /// Measures both models on the jig at each pressure triple (kPa) and stores the
-    /// component-wise linear fit. The surrogate uses the motor stiffness of `scene` and the
-    /// posture f_SP(P); `on_sample` counts finished pressures.
+    /// Measures both models on the jig (top plate clamped at the FEM's rest pose) at the fit and
+    /// held-out pressure triples (kPa), stores the component-wise linear fit over the fit set
+    /// with its RMSE and R^2 there and its RMSE on the held-out set. The surrogate uses the motor
+    /// stiffness of `scene`, the posture f_SP(P) and is held as `hold` says
+    /// ([`crate::force::JigHold::TcpPinned`] is the calibration's choice, see the README);
+    /// `on_sample` counts finished pressures.
     pub fn calibrate_force(
         &mut self,
         b: &ocm_fem::bellows::Bellows,
-        pressures_kpa: &[[f64; 3]],
+        fit_kpa: &[[f64; 3]],
+        held_out_kpa: &[[f64; 3]],
         scene: &crate::sim::SceneConfig,
+        hold: crate::force::JigHold,
         mut on_sample: impl FnMut(usize),
-    ) -> Result<ForcePairs> {
+    ) -> Result<ForceSamples> {
         let rest = ocm_fem::model::State::at_rest(&b.model);
-        let x0_fem = Vector3::from(b.state_of(&rest).tcp_m);
-        let chain = self.geometry.chain;
         // One jig in space for both: the FEM's TCP at rest (the chain shares the mesh frame).
-        let x0 = x0_fem;
+        let x0 = Vector3::from(b.state_of(&rest).tcp_m);
+        let chain = self.geometry.chain;
         let k: Posture = std::array::from_fn(|j| match KINDS[j] {
             JointKind::Prismatic => scene.prismatic_stiffness,
             _ => scene.revolute_stiffness,
         });
-        let (mut sur, mut fem) = (vec![], vec![]);
-        for (i, p) in pressures_kpa.iter().enumerate() {
+        let all: Vec<[f64; 3]> = fit_kpa.iter().chain(held_out_kpa).copied().collect();
+        let mut sur = Vec::with_capacity(all.len());
+        for p in &all {
             let q = self.map.posture(p)?;
-            let (_, fs) = crate::force::surrogate_jig(&chain, &k, &q, &x0)?;
-            let ff = crate::force::fem_jig_force(b, p, &x0_fem)?;
+            let (_, fs) = crate::force::surrogate_jig_held(&chain, &k, &q, &x0, hold)?;
             sur.push([fs.x, fs.y, fs.z]);
-            fem.push([ff.x, ff.y, ff.z]);
-            on_sample(i + 1);
         }
-        self.force_calibration = Some(ForceCalibration::fit(&sur, &fem)?);
-        Ok((sur, fem))
+        let fem: Vec<[f64; 3]> = crate::force::fem_clamped_jig_forces(b, &all, &mut on_sample)?
+            .iter()
+            .map(|f| [f.x, f.y, f.z])
+            .collect();
+        let nf = fit_kpa.len();
+        let mut cal = ForceCalibration::fit(&sur[..nf], &fem[..nf])?;
+        cal.set_held_out(&sur[nf..], &fem[nf..]);
+        cal.surrogate_hold = hold;
+        self.force_calibration = Some(cal);
+        Ok(ForceSamples {
+            pressures_kpa: all,
+            surrogate_n: sur,
+            fem_n: fem,
+            fit: nf,
+        })
     }
 
     /// Writes the model as JSON.

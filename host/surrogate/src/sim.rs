@@ -4,8 +4,9 @@
 //!
 //! Bodies follow the URDF ([`crate::urdf`]): the fixed base, per bending pair a dummy body and,
 //! per segment, two body links joined by the prismatic joint, then the top plate with a small
-//! sphere at the TCP as the force sensor. Every command is projected onto the grouped constraints
-//! ([`Limits::project`]) before it reaches the motors.
+//! sphere at the TCP as the force sensor. A command outside the joint limits or the grouped
+//! constraints is refused with an error naming the joint and its allowed range
+//! ([`Sim::command`]); [`Sim::command_clamped`] clamps it onto them instead ([`Limits::project`]).
 
 use crate::chain::{ChainGeometry, JointKind, KINDS, N_JOINTS, Posture};
 use crate::constraints::Limits;
@@ -54,6 +55,13 @@ pub struct SceneConfig {
     pub solver_iterations: usize,
     /// Radius of the TCP sensor sphere, m.
     pub tcp_sensor_radius_m: f64,
+    /// Normal stiffness of the batch stepper's penalty contact between the TCP sensor and the
+    /// surroundings, N/m (rapier's contacts are rigid and ignore it).
+    #[serde(default = "default_contact_stiffness")]
+    pub contact_stiffness_n_per_m: f64,
+    /// Normal damping of the batch stepper's penalty contact, N s/m.
+    #[serde(default = "default_contact_damping")]
+    pub contact_damping_n_s_per_m: f64,
     /// Rigid surroundings.
     pub surfaces: Vec<Surface>,
 }
@@ -68,8 +76,34 @@ impl Default for SceneConfig {
             prismatic_stiffness: 5000.0,
             prismatic_damping: 50.0,
             tcp_sensor_radius_m: 0.005,
+            contact_stiffness_n_per_m: default_contact_stiffness(),
+            contact_damping_n_s_per_m: default_contact_damping(),
             solver_iterations: 4,
             surfaces: vec![],
+        }
+    }
+}
+
+fn default_contact_stiffness() -> f64 {
+    1e5
+}
+
+fn default_contact_damping() -> f64 {
+    500.0
+}
+
+impl Surface {
+    /// A point of the surface and its normal pointing out of the solid (towards the robot).
+    pub fn point_and_normal(&self) -> (Vector3<f64>, Vector3<f64>) {
+        match *self {
+            Surface::Plane { height_m } => (Vector3::new(0.0, 0.0, height_m), -Vector3::z()),
+            Surface::Ramp {
+                height_m,
+                slope_rad,
+            } => (
+                Vector3::new(0.0, 0.0, height_m),
+                Vector3::new(slope_rad.sin(), 0.0, -slope_rad.cos()),
+            ),
         }
     }
 }
@@ -235,17 +269,11 @@ impl Sim {
         );
         let ground = world.insert_body(RigidBodyBuilder::fixed());
         for s in &config.surfaces {
-            let (n, h0) = match *s {
-                Surface::Plane { height_m } => (v(0.0, 0.0, -1.0), height_m),
-                Surface::Ramp {
-                    height_m,
-                    slope_rad,
-                } => (v(slope_rad.sin(), 0.0, -slope_rad.cos()), height_m),
-            };
+            let (o, n) = s.point_and_normal();
             world.insert_collider(
-                ColliderBuilder::halfspace(rapier3d_f64::na::Unit::new_unchecked(n))
+                ColliderBuilder::halfspace(rapier3d_f64::na::Unit::new_unchecked(v(n.x, n.y, n.z)))
                     .collision_groups(world_groups)
-                    .translation(v(0.0, 0.0, h0)),
+                    .translation(v(o.x, o.y, o.z)),
                 Some(ground),
             );
         }
@@ -266,9 +294,11 @@ impl Sim {
         Ok(sim)
     }
 
-    /// Teleports the joints to a (projected) posture at rest and commands it.
+    /// Teleports the joints to a feasible posture at rest and commands it (an infeasible one is
+    /// an error, as for [`Sim::command`]).
     pub fn set_posture(&mut self, q: &Posture) -> Result<Posture> {
-        let q = self.limits.project(q)?;
+        self.limits.check(q)?;
+        let q = *q;
         for j in 0..N_JOINTS {
             let (mb, link) = self
                 .world
@@ -294,10 +324,24 @@ impl Sim {
         self.command(&q)
     }
 
-    /// Commands a posture: projected onto the limits and grouped constraints, then sent to the
-    /// position motors. Returns the posture actually commanded. Non-finite values are an error.
+    /// Commands a posture: sent to the position motors if it satisfies the joint limits and the
+    /// grouped constraints; otherwise [`crate::SurrogateError::OutOfRange`] (or `NotFinite`)
+    /// names the first offending joint, its value and its allowed range, and nothing changes.
+    /// Returns the posture commanded.
     pub fn command(&mut self, q: &Posture) -> Result<Posture> {
+        self.limits.check(q)?;
+        self.send(q)
+    }
+
+    /// Commands the posture clamped onto the limits and grouped constraints
+    /// ([`Limits::project`]); returns what was commanded. Non-finite values are still an error.
+    pub fn command_clamped(&mut self, q: &Posture) -> Result<Posture> {
         let q = self.limits.project(q)?;
+        self.send(&q)
+    }
+
+    fn send(&mut self, q: &Posture) -> Result<Posture> {
+        let q = *q;
         let c = &self.config;
         for j in 0..N_JOINTS {
             let (stiff, damp) = match KINDS[j] {

@@ -6,6 +6,7 @@
 //! (i = 1..3), `tcp_joint`. The file also carries a `<mujoco>` element asking MuJoCo's compiler
 //! to keep fixed-joint links (so the TCP body survives) and to use the inertias as written.
 
+pub use crate::chain::joint_names;
 use crate::chain::{ChainGeometry, JointKind, KINDS, N_JOINTS};
 use crate::constraints::Limits;
 use std::fmt::Write;
@@ -184,16 +185,4 @@ pub fn to_urdf(name: &str, g: &ChainGeometry, limits: &Limits) -> String {
     );
     let _ = writeln!(out, "</robot>");
     out
-}
-
-/// Joint names in chain order, as written in the URDF.
-pub fn joint_names() -> [String; N_JOINTS] {
-    std::array::from_fn(|j| {
-        let pair = j / 3 + 1;
-        match KINDS[j] {
-            JointKind::RevoluteX => format!("x{pair}"),
-            JointKind::RevoluteY => format!("y{pair}"),
-            JointKind::Prismatic => format!("d{pair}"),
-        }
-    })
 }

@@ -5,8 +5,10 @@
 use ocm_fem::bellows::{Bellows, BellowsConfig};
 use ocm_surrogate::constraints::Limits;
 use ocm_surrogate::fem_samples::{self, FemSamples};
+use ocm_surrogate::force::JigHold;
 use ocm_surrogate::mapping::MatchConfig;
 use ocm_surrogate::model::SurrogateModel;
+use ocm_surrogate::sim::SceneConfig;
 
 #[test]
 fn surrogate_from_a_small_fem_sweep() {
@@ -67,8 +69,40 @@ fn surrogate_from_a_small_fem_sweep() {
             .posture(&[50.0, 0.0, 0.0])
             .unwrap_err()
             .to_string()
-            .contains("outside -20..35 kPa")
+            .contains("chamber 1 pressure = 50 kPa is outside the allowed range [-20, 35] kPa")
     );
+    // Force calibration over the whole range: the eight corners of -20..35 kPa and four random
+    // pressures to fit, four held out.
+    let mut m = m;
+    let fit = SurrogateModel::calibration_pressures(4, 2);
+    let held = fem_samples::random_pressures(4, 3);
+    let fs = m
+        .calibrate_force(
+            &b,
+            &fit,
+            &held,
+            &SceneConfig::default(),
+            JigHold::TcpPinned,
+            |_| {},
+        )
+        .unwrap();
+    let c = m.force_calibration.unwrap();
+    assert_eq!((c.samples, c.held_out_samples, fs.fit), (12, 4, 12));
+    // The line explains most of each component of the FEM's force, and predicts the held-out
+    // FEM forces to within a sixth of the component's span over the range.
+    for k in 0..3 {
+        let (lo, hi) = fs.fem_n[..fs.fit]
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), f| {
+                (a.min(f[k]), b.max(f[k]))
+            });
+        assert!(c.r2[k] > 0.8, "component {k}: {c:?}");
+        assert!(
+            c.held_out_rmse_n[k] < (hi - lo) / 6.0,
+            "component {k}: {c:?}"
+        );
+    }
+    assert!(fit.contains(&[35.0; 3]) && fit.contains(&[-20.0; 3]));
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -95,22 +129,67 @@ fn malformed_files_are_rejected_naming_the_place() {
 }
 
 #[test]
-fn fem_jig_holds_the_tcp_and_pushes_where_the_robot_would_go() {
+fn fem_jig_covers_the_whole_pressure_range_and_its_force_is_the_energy_gradient() {
     let Some(mesh) = ocm_datadir::test_data("bellows-manipulator/ManipulatorWhole25.vtk") else {
         return;
     };
-    let b = Bellows::load(mesh, BellowsConfig::default()).unwrap();
-    let rest = ocm_fem::model::State::at_rest(&b.model);
-    let x0 = nalgebra::Vector3::from(b.state_of(&rest).tcp_m);
-    let p = [6.0, -4.0, -4.0];
-    let mut solver = ocm_fem::solve::statics::StaticSolver::new(&b.model).unwrap();
-    let (free, _) = b.solve_kpa(&mut solver, &p).unwrap();
-    let moved = nalgebra::Vector3::from(b.state_of(&free).tcp_m) - x0;
-    // fem_jig_force errors unless the TCP is back within 1 um of x0.
-    let f = ocm_surrogate::force::fem_jig_force(&b, &p, &x0).unwrap();
-    assert!(f.norm() > 0.05, "{f:?}");
+    // The default (rigid-body) scene at the ends of the range: equal pressures push the clamp up
+    // at 35 kPa and pull it down at -20 kPa; one chamber at 35 kPa pushes it sideways.
+    let b = Bellows::load(&mesh, BellowsConfig::default()).unwrap();
+    let p = [
+        [35.0, 35.0, 35.0],
+        [-20.0, -20.0, -20.0],
+        [35.0, -20.0, -20.0],
+    ];
+    let f = ocm_surrogate::force::fem_clamped_jig_forces(&b, &p, |_| {}).unwrap();
     assert!(
-        f.dot(&moved) > 0.0,
-        "robot force {f:?}, free motion {moved:?}"
+        f[0].z > 10.0 && f[0].xy().norm() < 0.05 * f[0].z,
+        "{:?}",
+        f[0]
     );
+    assert!(
+        f[1].z < -5.0 && f[1].xy().norm() < 0.05 * f[1].z.abs(),
+        "{:?}",
+        f[1]
+    );
+    assert!(f[2].xy().norm() > 0.2, "{:?}", f[2]);
+    // Independent check in the penalty scene, where the top frame's nodes can be moved: the
+    // robot's force on the jig is minus the derivative of the total potential (strain energy
+    // plus load potential, minimised over the free nodes) with respect to the jig position.
+    let cfg = BellowsConfig {
+        rigid: ocm_fem::bellows::RigidMode::Penalty,
+        ..BellowsConfig::default()
+    };
+    let b = Bellows::load(&mesh, cfg).unwrap();
+    let pk = [35.0, -20.0, -20.0];
+    let f = ocm_surrogate::force::fem_clamped_jig_forces(&b, &[pk], |_| {}).unwrap()[0];
+    let zt = b.config.rigid_top_above_mm * 1e-3;
+    let potential = |axis: usize, shift: f64| {
+        let mut m = b.model.clone();
+        for i in 0..m.num_nodes() {
+            if m.rest[i].z >= zt {
+                for d in 0..3 {
+                    m.prescribe(i, d, if d == axis { shift } else { 0.0 });
+                }
+            }
+        }
+        let mut solver = ocm_fem::solve::statics::StaticSolver::new(&m).unwrap();
+        solver.load_steps = 4;
+        let loads = b.loads_kpa(&pk);
+        let (st, _) = solver.solve_from_rest(&m, &loads).unwrap();
+        let ev = m
+            .evaluate(&solver.pattern, &st.x, &loads, 1.0, false)
+            .unwrap();
+        ev.strain_energy + ev.load_potential
+    };
+    let h = 2e-5;
+    for axis in [0, 2] {
+        let d = (potential(axis, h) - potential(axis, -h)) / (2.0 * h);
+        assert!(
+            (d + f[axis]).abs() < 1e-4 * f.norm(),
+            "axis {axis}: -dPi/dx {} N, reaction {} N",
+            -d,
+            f[axis]
+        );
+    }
 }

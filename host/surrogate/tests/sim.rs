@@ -4,6 +4,8 @@
 
 mod common;
 use common::chain;
+use ocm_surrogate::SurrogateError;
+use ocm_surrogate::batch::BatchModel;
 use ocm_surrogate::chain::{N_JOINTS, Posture};
 use ocm_surrogate::constraints::Limits;
 use ocm_surrogate::sim::{SceneConfig, Sim, Surface};
@@ -43,20 +45,76 @@ fn rapier_posture_and_tcp_agree_with_our_kinematics() {
 }
 
 #[test]
-fn commands_are_projected_onto_the_grouped_constraints() {
+fn out_of_range_commands_are_refused_and_clamping_is_explicit() {
     let (g, lim) = (chain(), Limits::default());
     let mut sim = Sim::new(&g, &lim, SceneConfig::default()).unwrap();
+    let model = BatchModel::new(&g, &lim, &SceneConfig::default()).unwrap();
+    let mut env = model.env_at(&[0.0; N_JOINTS]).unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    let mut refused = 0;
     for _ in 0..50 {
         let q: Posture = std::array::from_fn(|_| rng.random_range(-1.0..1.0));
-        let applied = sim.command(&q).unwrap();
+        // Both steppers refuse an infeasible command with the same typed error and keep the
+        // previous command; the explicit clamping API commands a feasible posture instead.
+        let before = (sim.commanded(), env.target);
+        match (lim.check(&q), sim.command(&q), model.command(&mut env, &q)) {
+            (Err(e), Err(a), Err(b)) => {
+                assert_eq!(e.to_string(), a.to_string());
+                assert_eq!(e.to_string(), b.to_string());
+                assert!(matches!(a, SurrogateError::OutOfRange { .. }), "{a}");
+                assert_eq!((sim.commanded(), env.target), before);
+                refused += 1;
+            }
+            (Ok(()), Ok(_), Ok(_)) => {}
+            other => panic!("check and commands disagree: {other:?}"),
+        }
+        let applied = sim.command_clamped(&q).unwrap();
         lim.check(&applied).unwrap();
+        assert_eq!(model.command_clamped(&mut env, &q).unwrap(), applied);
         sim.step();
     }
+    assert_eq!(refused, 50, "uniform commands in +-1 are all infeasible");
+    // The error names the joint, the value and the allowed range.
+    let mut q = [0.0; N_JOINTS];
+    q[2] = 0.03;
+    match sim.command(&q).unwrap_err() {
+        SurrogateError::OutOfRange {
+            channel,
+            value,
+            lo,
+            hi,
+            unit,
+        } => {
+            assert!(channel.starts_with("joint 2 (d1, d)"), "{channel}");
+            assert_eq!((value, lo, hi, unit), (0.03, 0.0, 0.02, "m"));
+        }
+        e => panic!("{e}"),
+    }
+    // A neighbour too far from the joint below: the range is the one eq 4.23 leaves it.
+    let mut q = [0.0; N_JOINTS];
+    q[0] = 0.1;
+    q[3] = 0.12;
+    let e = model.command(&mut env, &q).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("joint 3 (x2, theta_x)") && msg.contains("[0.09") && msg.contains("eq 4.23"),
+        "{msg}"
+    );
     let mut bad = [0.0; N_JOINTS];
     bad[4] = f64::NAN;
-    let e = sim.command(&bad).unwrap_err().to_string();
-    assert!(e.contains("joint 4") && e.contains("not finite"), "{e}");
+    for e in [
+        sim.command(&bad).unwrap_err(),
+        sim.command_clamped(&bad).unwrap_err(),
+        sim.set_posture(&bad).unwrap_err(),
+        model.command(&mut env, &bad).unwrap_err(),
+    ] {
+        assert!(matches!(e, SurrogateError::NotFinite { .. }), "{e}");
+        let msg = e.to_string();
+        assert!(
+            msg.contains("joint 4 (y2, theta_y)") && msg.contains("not finite"),
+            "{msg}"
+        );
+    }
 }
 
 #[test]
@@ -104,7 +162,6 @@ fn gravity_presses_the_tcp_onto_a_plane_and_a_ramp() {
 
 #[test]
 fn batch_stepper_matches_rapier_equilibrium_and_motion() {
-    use ocm_surrogate::batch::BatchModel;
     let (g, lim) = (chain(), Limits::default());
     let cfg = SceneConfig::default();
     let model = BatchModel::new(&g, &lim, &cfg).unwrap();
@@ -177,4 +234,50 @@ fn set_posture_teleports_the_chain() {
         );
     }
     assert!((sim.tcp() - g.tcp(&q)).norm() < 1e-9);
+}
+
+/// The batch stepper's penalty contact against rapier's rigid contact (32 solver iterations):
+/// the robot extends into a plate and a ramp above its TCP under gravity; after 3 s the normal
+/// forces on the sensor agree within 4 % (rapier lets contacts sink by up to its allowed linear
+/// error, the penalty spring by depth = F / k; the batch contact is frictionless, rapier's not,
+/// so only the normal component is compared).
+#[test]
+fn batch_contact_matches_rapier_contact_force() {
+    let (g, lim) = (chain(), Limits::default());
+    let rest_tcp = g.tcp(&[0.0; N_JOINTS]);
+    let top = rest_tcp.z + 0.005 + 0.003;
+    let mut q = [0.0; N_JOINTS];
+    q[2] = 0.005;
+    q[5] = 0.005;
+    q[8] = 0.005;
+    q[0] = 0.01;
+    for surface in [
+        Surface::Plane { height_m: top },
+        Surface::Ramp {
+            height_m: top,
+            slope_rad: 0.2,
+        },
+    ] {
+        let cfg = SceneConfig {
+            surfaces: vec![surface],
+            solver_iterations: 32,
+            ..SceneConfig::default()
+        };
+        let mut sim = Sim::new(&g, &lim, cfg.clone()).unwrap();
+        let model = BatchModel::new(&g, &lim, &cfg).unwrap();
+        let mut env = model.env_at(&[0.0; N_JOINTS]).unwrap();
+        sim.command(&q).unwrap();
+        model.command(&mut env, &q).unwrap();
+        for _ in 0..720 {
+            sim.step();
+            model.step(&mut env);
+        }
+        let (fr, fb) = (sim.tcp_force(), model.tcp_force(&env));
+        let (_, n) = surface.point_and_normal();
+        assert!(fb.dot(&n) > 1.0, "{fb:?}");
+        assert!(
+            (fr.dot(&n) - fb.dot(&n)).abs() < 0.04 * fr.dot(&n),
+            "{surface:?}: normal force rapier {fr:?}, batch {fb:?}"
+        );
+    }
 }
