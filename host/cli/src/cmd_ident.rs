@@ -148,6 +148,10 @@ pub struct IdentArgs {
     /// Smallest held-out RMSE gain (percent) for a cause to be named.
     #[arg(long, default_value_t = 2.0)]
     pub min_gain: f64,
+    /// OCM parameter set of the axial, bending and pose baselines: `table-3.1` (default, the
+    /// dissertation's table) or `calibrated` (the virtual lab's plant and the LUT).
+    #[arg(long, value_enum, default_value_t = crate::cmd_lut::Params::Table31)]
+    pub params: crate::cmd_lut::Params,
 }
 
 /// Runs `ocm ident synth`.
@@ -239,6 +243,7 @@ pub fn run(args: IdentArgs) -> anyhow::Result<()> {
         alpha: args.alpha,
         min_gain_pct: args.min_gain,
         series_model,
+        ocm: args.params.into(),
         ..Config::default()
     };
     let id = ocm_ident::identify(&record, &cfg)?;

@@ -14,6 +14,8 @@
 //!   ([`crate::statespace`]) for dynamic systems; each is reported beside the other.
 //! - `series` with `sim_` columns: the simulator's prediction, no free parameter.
 
+use ocm_shared::params::ParamPreset;
+
 use crate::data::{Kind, Record};
 use crate::error::IdentError;
 use crate::manipulator::Segment;
@@ -88,8 +90,9 @@ impl Baseline {
         rec: &Record,
         train: &[bool],
         series: SeriesModel,
+        ocm: ParamPreset,
     ) -> Result<Baseline, IdentError> {
-        let physics = Physics::table_3_1();
+        let physics = Physics::preset(ocm);
         match rec.kind {
             Kind::Axial => {
                 let (lo, hi) = physics.strain_range();

@@ -145,7 +145,7 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         )));
     }
     let train: Vec<bool> = test.iter().map(|t| !t).collect();
-    let baseline = Baseline::for_record(rec, &train, cfg.series_model)?;
+    let baseline = Baseline::for_record(rec, &train, cfg.series_model, cfg.ocm)?;
     let prep = Prepared::new(rec, baseline.clone(), test.clone());
     let sel = select::select(&prep, cfg);
     let baseline_rmse = select::heldout_rmse(&prep, &sel.baseline.pred);
@@ -419,6 +419,30 @@ fn schema_warnings(rec: &Record, prep: &Prepared) -> Vec<String> {
             w.push(format!(
                 "z is negative on {neg} of {} rows: the schema's z points from base to tip of a standing segment (a hanging mount's log must be rotated first)",
                 z.len()
+            ));
+        }
+    }
+    // Pressures far outside the parameter set's range: the record is from another design (the
+    // lab's calibrated plant read with Table 3.1, say); the fit would be a stretched reading.
+    if let crate::baseline::Baseline::Pose {
+        physics,
+        stiffness_scale,
+    } = &prep.baseline
+    {
+        let (lo, hi) = physics.pressure_range_pa();
+        let (lo, hi) = (lo * stiffness_scale, hi * stiffness_scale);
+        let total = 3 * rec.len();
+        let out = rec.inputs[..3]
+            .iter()
+            .flat_map(|ch| &ch.values)
+            .filter(|p| **p < lo || **p > hi)
+            .count();
+        if out * 2 > total {
+            w.push(format!(
+                "{out} of {total} chamber pressures lie outside {:.1}..{:.1} kPa, the working range of the {} parameter set at the fitted stiffness scale {stiffness_scale:.3}: the record may come from another design (the virtual lab's plant is `--params calibrated`)",
+                lo / 1e3,
+                hi / 1e3,
+                physics.params_label()
             ));
         }
     }

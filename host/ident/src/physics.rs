@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 
 use ocm_lutgen::OcmModel;
 use ocm_lutgen::surface::{BendDomain, EnergySurface, bar_hinge_volume};
-use ocm_shared::params::OcmParams;
+use ocm_shared::params::{OcmParams, ParamPreset};
 
 use crate::error::IdentError;
 
@@ -34,6 +34,43 @@ pub struct Physics {
     surface: EnergySurface<STRAIN_ORDER, BEND_ORDER, 3>,
     /// Strain on [force node][pressure node] at unit stiffness scale, built on first use.
     inverse: OnceLock<Vec<f64>>,
+    /// Force and pressure ranges of the inverse table: [`INV_FORCE_RANGE`] and
+    /// [`INV_PRESSURE_RANGE`] scaled to this parameter set (see [`inverse_scales`]).
+    inv_force: (f64, f64),
+    inv_pressure: (f64, f64),
+}
+
+/// How much larger this parameter set's forces and pressures are than Table 3.1's, for which
+/// the inverse table's ranges were chosen: the span of the elastic force `bar + hinge` over the
+/// strain range, and that span over the mean pressure coefficient. Both are 1 for Table 3.1 (the
+/// same computation on the same parameters), so its table is unchanged; a stiffer set (the
+/// calibrated one is about 20 times stiffer) gets a table that still covers its working range
+/// instead of falling back to bisection on every row.
+fn inverse_scales(model: &OcmModel) -> (f64, f64) {
+    let spans = |m: &OcmModel| -> (f64, f64) {
+        let (lo, hi) = m.strain_limits();
+        let (mut fmin, mut fmax, mut pc) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
+        let k = 40;
+        for i in 0..=k {
+            let e = lo + (hi - lo) * (0.05 + 0.9 * i as f64 / k as f64);
+            let t = m.axial_terms(e);
+            let f = t.bar_n + t.hinge_n;
+            fmin = fmin.min(f);
+            fmax = fmax.max(f);
+            pc += t.pressure_n_per_pa.abs() / (k + 1) as f64;
+        }
+        (fmax - fmin, (fmax - fmin) / pc)
+    };
+    let Ok(reference) = OcmModel::new(OcmParams::TABLE_3_1) else {
+        return (1.0, 1.0);
+    };
+    let (f, p) = spans(model);
+    let (f_ref, p_ref) = spans(&reference);
+    let ratio = |a: f64, b: f64| {
+        let r = a / b;
+        if r.is_finite() && r > 0.0 { r } else { 1.0 }
+    };
+    (ratio(f, f_ref), ratio(p, p_ref))
 }
 
 /// Catmull-Rom interpolation (of the inverse table) of `f` sampled at unit spacing, at fractional index `x`.
@@ -69,19 +106,47 @@ impl Physics {
             bar_hinge_volume,
         )
         .map_err(|e| IdentError::Model(e.to_string()))?;
+        let (sf, sp) = inverse_scales(&model);
         Ok(Self {
             params,
             surface,
             inverse: OnceLock::new(),
+            inv_force: (INV_FORCE_RANGE.0 * sf, INV_FORCE_RANGE.1 * sf),
+            inv_pressure: (INV_PRESSURE_RANGE.0 * sp, INV_PRESSURE_RANGE.1 * sp),
         })
     }
 
     /// The Table 3.1 model, built once per process.
     pub fn table_3_1() -> &'static Physics {
-        static CELL: OnceLock<Physics> = OnceLock::new();
-        CELL.get_or_init(|| {
-            Physics::new(OcmParams::TABLE_3_1).expect("Table 3.1 parameters are valid")
-        })
+        Physics::preset(ParamPreset::Table31)
+    }
+
+    /// The model of a named parameter set, built once per process.
+    pub fn preset(preset: ParamPreset) -> &'static Physics {
+        static TABLE: OnceLock<Physics> = OnceLock::new();
+        static CALIBRATED: OnceLock<Physics> = OnceLock::new();
+        let cell = match preset {
+            ParamPreset::Table31 => &TABLE,
+            ParamPreset::Calibrated => &CALIBRATED,
+        };
+        cell.get_or_init(|| Physics::new(preset.ocm()).expect("a preset's parameters are valid"))
+    }
+
+    /// Pressures at unit stiffness scale that the inverse-strain table covers, pascals: the
+    /// parameter set's working range (Table 3.1: -3..9 kPa).
+    pub fn pressure_range_pa(&self) -> (f64, f64) {
+        self.inv_pressure
+    }
+
+    /// The parameter set's name, for reports.
+    pub fn params_label(&self) -> &'static str {
+        if self.params == OcmParams::TABLE_3_1 {
+            "Table 3.1"
+        } else if self.params == OcmParams::CALIBRATED {
+            "calibrated"
+        } else {
+            "given"
+        }
     }
 
     /// Strain range covered by the expansion.
@@ -146,8 +211,8 @@ impl Physics {
         }
         let f = force_n / scale;
         let p = pressure_pa / scale;
-        let (f0, f1) = INV_FORCE_RANGE;
-        let (p0, p1) = INV_PRESSURE_RANGE;
+        let (f0, f1) = self.inv_force;
+        let (p0, p1) = self.inv_pressure;
         if !(f >= f0 && f <= f1 && p >= p0 && p <= p1) {
             return self.axial_strain_exact(force_n, pressure_pa, scale);
         }
@@ -263,30 +328,40 @@ mod tests {
 
     #[test]
     fn inverse_table_solves_the_force_law() {
-        let p = Physics::table_3_1();
-        let (lo, hi) = p.strain_range();
-        let mut worst: f64 = 0.0;
-        let mut checked = 0;
-        for a in 0..41 {
-            for b in 0..53 {
-                let f = -1.2 + 2.9 * (a as f64 + 0.31) / 41.0;
-                let pr = -2500.0 + 10500.0 * (b as f64 + 0.57) / 53.0;
-                for s in [0.6, 1.0, 1.7] {
-                    let exact = p.axial_strain_exact(f * s, pr * s, s);
-                    // the clamp at the table ends is a kink the spline does not follow
-                    if exact < lo + 0.05 || exact > hi - 0.05 {
-                        continue;
+        // both presets: the calibrated set is about 20 times stiffer, its table is scaled
+        for preset in ParamPreset::ALL {
+            let p = Physics::preset(preset);
+            let (lo, hi) = p.strain_range();
+            let (sf, sp) = (p.inv_force.1 / 2.0, p.inv_pressure.1 / 9000.0);
+            if preset == ParamPreset::Table31 {
+                assert_eq!((sf, sp), (1.0, 1.0));
+            }
+            let mut worst: f64 = 0.0;
+            let mut checked = 0;
+            for a in 0..41 {
+                for b in 0..53 {
+                    let f = (-1.2 + 2.9 * (a as f64 + 0.31) / 41.0) * sf;
+                    let pr = (-2500.0 + 10500.0 * (b as f64 + 0.57) / 53.0) * sp;
+                    for s in [0.6, 1.0, 1.7] {
+                        let exact = p.axial_strain_exact(f * s, pr * s, s);
+                        // the clamp at the table ends is a kink the spline does not follow
+                        if exact < lo + 0.05 || exact > hi - 0.05 {
+                            continue;
+                        }
+                        let e = p.axial_strain(f * s, pr * s, s);
+                        worst = worst.max((e - exact).abs());
+                        checked += 1;
                     }
-                    let e = p.axial_strain(f * s, pr * s, s);
-                    worst = worst.max((e - exact).abs());
-                    checked += 1;
                 }
             }
+            assert!(checked > 3000, "{preset:?}: {checked}");
+            assert!(
+                worst < 1e-5,
+                "{preset:?}: inverse table strain error {worst}"
+            );
+            // outside the table: the exact solution, which solves F_A = f
+            let e = p.axial_strain(30.0 * sf, 500.0, 1.0);
+            assert_eq!(e, p.axial_strain_exact(30.0 * sf, 500.0, 1.0));
         }
-        assert!(checked > 3000, "{checked}");
-        assert!(worst < 1e-5, "inverse table strain error {worst}");
-        // outside the table: the exact solution, which solves F_A = f
-        let e = p.axial_strain(30.0, 500.0, 1.0);
-        assert_eq!(e, p.axial_strain_exact(30.0, 500.0, 1.0));
     }
 }

@@ -24,6 +24,8 @@
 use serde::Serialize;
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
+use ocm_shared::params::ParamPreset;
+
 use crate::baseline::SeriesModel;
 use crate::cause::Cause;
 use crate::direction::{DirectionTest, direction_tests};
@@ -49,6 +51,9 @@ pub struct Config {
     /// Also fit the linear state-space model beside a static `series` baseline and report its
     /// held-out error (a reference for the reader; it does not enter the verdict).
     pub dynamic_reference: bool,
+    /// OCM parameter set of the energy-model baselines (`axial`, `bending`, `pose`): Table 3.1
+    /// by default; `Calibrated` for the virtual lab's plant and the LUT.
+    pub ocm: ParamPreset,
 }
 
 impl Default for Config {
@@ -62,6 +67,7 @@ impl Default for Config {
             hac_lags: 20,
             series_model: SeriesModel::Static,
             dynamic_reference: true,
+            ocm: ParamPreset::Table31,
         }
     }
 }

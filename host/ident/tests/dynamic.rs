@@ -1,5 +1,6 @@
 //! Hidden effects inside the dynamics of oscillators, identified on the linear state-space
-//! baseline (free-run predictions). `OCM_DYN_SEEDS` sets the seeds per case (default 3).
+//! baseline (free-run predictions). `OCM_DYN_SEEDS` sets the seeds per case (default 3),
+//! `OCM_DYN_SEED0` the first seed (default 1000).
 
 use ocm_ident::baseline::SeriesModel;
 use ocm_ident::dynamic_generator::{DynSpec, EFFECTS, System, generate};
@@ -11,6 +12,11 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(3);
+    // the first seed (`OCM_DYN_SEED0`, default 1000): other values check fresh records
+    let seed0: u64 = std::env::var("OCM_DYN_SEED0")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1000);
     let cfg = Config {
         series_model: SeriesModel::StateSpace,
         ..Config::default()
@@ -38,7 +44,7 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
                             let g = generate(&DynSpec {
                                 system,
                                 effect,
-                                seed: 1000 + seed,
+                                seed: seed0 + seed,
                                 rows: 2000,
                             });
                             let id = identify(&g.record, cfg).unwrap();
@@ -76,11 +82,11 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
     }
     eprintln!("dynamic battery: {correct} / {total} correct, {false_alarms} false alarms");
     // regression bounds of the measured figures (3 seeds: 16 of 18 correct, no false alarm on
-    // 6 clean records; 10 seeds: 50 of 60, none on 20); the 95 % is not reached, see
-    // the README
+    // 6 clean records; 10 seeds: 55 of 60, none on 20; fresh seeds 2000-2009: 50 of 60, none
+    // on 20); the 95 % is not reached, see the README
     assert!(total > 0);
     assert_eq!(false_alarms, 0, "{false_alarms} false alarms");
-    assert!(correct * 100 >= 75 * total, "{correct} / {total}");
+    assert!(correct * 100 >= 80 * total, "{correct} / {total}");
 }
 
 /// The speed figure of a 100k-row dynamic record (no assertion on time: run it with

@@ -45,6 +45,32 @@ impl LoopSignal {
             LoopSignal::Mixed(m, r, vs, p, q) => ((y - m) / r).powi(p) * (v / vs).powi(q),
         }
     }
+
+    /// Whether the signal is a dissipative force whose weight has a known sign: a stop
+    /// operator (elastic-plastic element), Coulomb friction and its Stribeck peak oppose the
+    /// motion, so their force acts against the displacement or the velocity. Viscous and
+    /// stiffening terms stay free (the refitted linear dynamics share them).
+    pub(super) fn dissipative(&self) -> bool {
+        matches!(
+            self,
+            LoopSignal::Stop(_) | LoopSignal::Sign(_) | LoopSignal::Stribeck(..)
+        )
+    }
+}
+
+/// The factor that turns a dissipative signal into a force of non-negative weight acting at
+/// input `k`: `-sign(G_k)`, with `G_k` the baseline's static gain from input `k` to the output
+/// (`C (I - A)^-1 B_k + D_k`). A force opposing the output's motion enters against the
+/// direction in which that input moves the output. `None` when the gain is zero or not finite
+/// (the sign is unknown and the weight stays free).
+pub(super) fn restoring_sign(ss: &StateSpace, c_row: &[f64], d_k: f64, k: usize) -> Option<f64> {
+    let n = ss.order();
+    let bk = ss.b.columns(k, 1).into_owned();
+    let x = (nalgebra::DMatrix::<f64>::identity(n, n) - &ss.a)
+        .lu()
+        .solve(&bk)?;
+    let g: f64 = d_k + (0..n).map(|j| c_row[j] * x[j]).sum::<f64>();
+    (g.is_finite() && g != 0.0).then(|| -g.signum())
 }
 
 impl Prepared<'_> {
@@ -170,14 +196,21 @@ impl Prepared<'_> {
         }
         let mut cols = Vec::new();
         let mut names = Vec::new();
+        let mut nonneg = Vec::new();
         for &k in &rec.drives {
             let d_k = ch.theta[order + k];
-            for (sig, label) in &signals {
-                cols.push(ss.filter(sig, k, &ch.theta[..order], d_k, starts));
+            let sign = restoring_sign(ss, &ch.theta[..order], d_k, k);
+            for ((sig, label), (spec, _)) in signals.iter().zip(&specs) {
+                let mut col = ss.filter(sig, k, &ch.theta[..order], d_k, starts);
+                let constrained = spec.dissipative() && sign.is_some();
+                if let (true, Some(s)) = (constrained, sign) {
+                    col.iter_mut().for_each(|v| *v *= s);
+                }
+                cols.push(col);
+                nonneg.push(constrained);
                 names.push(format!("{label} as {}", rec.inputs[k].name));
             }
         }
-        let nonneg = vec![false; cols.len()];
         Some((cols, names, nonneg))
     }
 

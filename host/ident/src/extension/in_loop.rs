@@ -15,7 +15,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::dynamic_features::LoopSignal;
+use super::dynamic_features::{LoopSignal, restoring_sign};
 use super::prepared::Prepared;
 use super::refined::{Cached, InLoopFit};
 use crate::cause::Cause;
@@ -90,6 +90,10 @@ struct Loop<'a> {
     /// Per weight: the drive it acts as and the signal it scales (the linear features' order:
     /// per cause, per drive, per signal).
     map: Vec<(usize, usize)>,
+    /// Per weight: the factor of its signal (`-sign` of the drive's static gain for a
+    /// dissipative signal, see [`restoring_sign`], else 1) and whether the weight is kept
+    /// non-negative.
+    factor: Vec<(f64, bool)>,
 }
 
 impl Loop<'_> {
@@ -185,8 +189,8 @@ impl Loop<'_> {
                     phi[q] = sig.eval(z, v, &mut plays[q]);
                 }
                 force.iter_mut().for_each(|f| *f = 0.0);
-                for (wj, &(k, q)) in w.iter().zip(&self.map) {
-                    force[k] += wj * phi[q];
+                for ((wj, &(k, q)), &(f, _)) in w.iter().zip(&self.map).zip(&self.factor) {
+                    force[k] += wj * f * phi[q];
                 }
                 let mut out_i = y;
                 for k in 0..m {
@@ -246,12 +250,19 @@ impl Prepared<'_> {
             return None;
         }
         let drives = &rec.drives;
+        let theta = &self.channels[c].theta;
         let mut map = Vec::new();
+        let mut factor = Vec::new();
         let mut off = 0;
         for g in groups {
             for &k in drives {
-                for q in 0..g.len() {
+                let sign = restoring_sign(ss, &theta[..n], theta[n + k], k);
+                for (q, sig) in g.iter().enumerate() {
                     map.push((k, off + q));
+                    factor.push(match sign {
+                        Some(s) if sig.dissipative() => (s, true),
+                        _ => (1.0, false),
+                    });
                 }
             }
             off += g.len();
@@ -288,6 +299,7 @@ impl Prepared<'_> {
             time_s: &rec.time_s,
             signals,
             map,
+            factor,
         };
         let lay = &lp.lay;
         // start: the baseline's dynamics, the joint fit's output map and weights, and the
@@ -451,7 +463,14 @@ impl Prepared<'_> {
                     lambda *= 10.0;
                     continue;
                 };
-                let t: Vec<f64> = th.iter().zip(step.iter()).map(|(p, s)| p + s).collect();
+                let mut t: Vec<f64> = th.iter().zip(step.iter()).map(|(p, s)| p + s).collect();
+                // projected step: dissipative weights stay non-negative
+                for (j, &(_, nonneg)) in lp.factor.iter().enumerate() {
+                    if nonneg {
+                        let v = &mut t[lay.weights() + j];
+                        *v = v.max(0.0);
+                    }
+                }
                 if let Some(rt) = residuals(&t) {
                     let ct: f64 = rt.iter().map(|e| e * e).sum();
                     if ct < cost {
