@@ -1,6 +1,7 @@
 //! `ocm rl`: reinforcement learning on the surrogate: train (behaviour cloning or PPO), evaluate
 //! on 100-point episodes with plots of the tracked paths, and benchmark the environments.
 
+use crate::cmd_fem::{BELLOWS_MESH, data_path};
 use crate::plot::{Chart, Series};
 use crate::progress::bar;
 use anyhow::Context;
@@ -9,12 +10,16 @@ use ocm_learn::TrainConfig;
 use ocm_rl::bc::{self, BcConfig};
 use ocm_rl::bench::{self, BenchConfig};
 use ocm_rl::env::{Env, EnvConfig, PHYSICS_DT_S};
-use ocm_rl::eval::{EvalReport, evaluate};
+use ocm_rl::eval::{EvalReport, evaluate, evaluate_episodes};
 use ocm_rl::policy::{Policy, PolicyMeta, policy_config};
 use ocm_rl::ppo::{self, PpoConfig, RlRecord};
 use ocm_rl::robot::Robot;
 use ocm_rl::sac::{self, SacConfig};
-use ocm_rl::tasks::TaskKind;
+use ocm_rl::tasks::{Episode, TaskKind};
+use ocm_rl::transfer::{
+    self, Disconnect, RomAssets, SurrogatePlant, TransferConfig, evaluate_on_plant,
+};
+use ocm_surrogate::model::SurrogateModel;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -95,6 +100,26 @@ pub enum RlCommand {
         /// Evaluation episodes of 100 points after training.
         #[arg(long, default_value_t = 5)]
         eval_episodes: usize,
+        /// PPO and SAC: start from this policy checkpoint (a BC policy.ckpt).
+        #[arg(long)]
+        init_from: Option<PathBuf>,
+        /// PPO: exploration standard deviation at the start and at the end, action units
+        /// (default 0.3 and 0.05; 0.05 and 0.02 with --init-from).
+        #[arg(long, num_args = 2, value_names = ["START", "END"])]
+        std: Option<Vec<f64>>,
+        /// PPO and SAC: Adam step size (default 3e-4).
+        #[arg(long)]
+        learning_rate: Option<f64>,
+        /// PPO: iterations (SAC: vector steps after the warm-up) in which only the critic learns.
+        #[arg(long, default_value_t = 0)]
+        critic_warmup: usize,
+        /// SAC with --init-from: gradient steps fitting the actor to the initial policy.
+        #[arg(long, default_value_t = 2000)]
+        pretrain_steps: usize,
+        /// SAC with --init-from: weight of the squared distance to the initial policy's action
+        /// in the actor loss.
+        #[arg(long, default_value_t = 0.0)]
+        bc_weight: f64,
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
@@ -125,6 +150,9 @@ pub enum RlCommand {
         /// Print JSON.
         #[arg(long)]
         json: bool,
+        /// Deployment (transfer) settings.
+        #[command(flatten)]
+        deploy: DeployArgs,
     },
     /// Environment steps per second (single and vectorised) and policy inference rate, medians.
     Bench {
@@ -155,6 +183,91 @@ pub enum RlCommand {
     },
 }
 
+/// Where a policy runs.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq)]
+pub enum PlantArg {
+    /// The RL environment on the surrogate (joint commands, as trained).
+    Surrogate,
+    /// The reduced FEM of `ocm mor` through the inverse actuation map and the filter.
+    Reduced,
+    /// The surrogate driven in pressure space through f_SP (the transfer chain without the
+    /// model gap).
+    SurrogatePressure,
+}
+
+/// Paths to deploy on.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq)]
+pub enum PathArg {
+    /// The task's own paths.
+    Task,
+    /// The unseen figure-eight on a curved surface with 1 N (Fig 4.26-A; scored as Task 3).
+    FigureEight,
+}
+
+/// Settings of `ocm rl eval` beyond the surrogate environment.
+#[derive(clap::Args, Debug)]
+pub struct DeployArgs {
+    /// Plant.
+    #[arg(long, value_enum, default_value = "surrogate")]
+    plant: PlantArg,
+    /// Path set.
+    #[arg(long, value_enum, default_value = "task")]
+    path: PathArg,
+    /// Reduced model folder (`ocm mor pod` + `ocm mor reduce` output); --plant reduced.
+    #[arg(long)]
+    rom: Option<PathBuf>,
+    /// Bellows mesh (default: the shared data's).
+    #[arg(long)]
+    mesh: Option<PathBuf>,
+    /// Add the FEM body's weight to the reduced model (g = 9.81 m/s^2; `ocm mor` builds it
+    /// without gravity, the surrogate the policies trained on has it).
+    #[arg(long)]
+    rom_gravity: bool,
+    /// Reduced-model time step, s (at most; each command period is cut into equal steps).
+    #[arg(long, default_value_t = 0.005)]
+    rom_dt_s: f64,
+    /// Command rate, Hz.
+    #[arg(long, default_value_t = 20.0)]
+    command_rate_hz: f64,
+    /// Moving average over this many pressure commands (1: none).
+    #[arg(long, default_value_t = 3)]
+    filter_window: usize,
+    /// Laps of the path per run.
+    #[arg(long, default_value_t = 1)]
+    laps: usize,
+    /// Vent this chamber (1..3) for --disconnect-for-s from --disconnect-at-s into the run.
+    #[arg(long)]
+    disconnect_chamber: Option<usize>,
+    /// Start of the cut, s.
+    #[arg(long, default_value_t = 5.0)]
+    disconnect_at_s: f64,
+    /// Length of the cut, s.
+    #[arg(long, default_value_t = 5.0)]
+    disconnect_for_s: f64,
+}
+
+impl DeployArgs {
+    fn config(&self) -> anyhow::Result<TransferConfig> {
+        let disconnect = match self.disconnect_chamber {
+            None => None,
+            Some(c) if (1..=3).contains(&c) => Some(Disconnect {
+                chamber: c - 1,
+                start_s: self.disconnect_at_s,
+                duration_s: self.disconnect_for_s,
+                ..Disconnect::default()
+            }),
+            Some(c) => anyhow::bail!("--disconnect-chamber {c}: chambers are 1, 2, 3"),
+        };
+        Ok(TransferConfig {
+            command_rate_hz: self.command_rate_hz,
+            filter_window: self.filter_window,
+            laps: self.laps,
+            disconnect,
+            ..TransferConfig::default()
+        })
+    }
+}
+
 fn robot(model: &Path) -> anyhow::Result<Arc<Robot>> {
     Ok(Arc::new(
         Robot::read(model, PHYSICS_DT_S).with_context(|| format!("reading {}", model.display()))?,
@@ -167,7 +280,13 @@ fn mkdir(out: &Path) -> anyhow::Result<()> {
 
 /// Plots of the first evaluation episode: tracked TCP against the reference in x-y and x-z (mm),
 /// and the force against its target over the steps for force tasks.
-fn plot_episode(out: &Path, task: TaskKind, label: &str, r: &EvalReport) -> anyhow::Result<()> {
+fn plot_episode(
+    out: &Path,
+    task: TaskKind,
+    label: &str,
+    plant: &str,
+    r: &EvalReport,
+) -> anyhow::Result<()> {
     let ep = &r.first_episode;
     let pick = |f: &dyn Fn(&ocm_rl::env::StepInfo) -> (f64, f64)| -> Vec<(f64, f64)> {
         ep.iter().map(f).collect()
@@ -187,7 +306,7 @@ fn plot_episode(out: &Path, task: TaskKind, label: &str, r: &EvalReport) -> anyh
                     dots: true,
                 },
                 Series {
-                    label: format!("surrogate X_P ({label})"),
+                    label: format!("{plant} X_P ({label})"),
                     points: pick(&|s| (s.tcp_m[i] * 1e3, s.tcp_m[j] * 1e3)),
                     dots: false,
                 },
@@ -223,6 +342,49 @@ fn plot_episode(out: &Path, task: TaskKind, label: &str, r: &EvalReport) -> anyh
         .write(out, "force")?;
     }
     Ok(())
+}
+
+/// TCP error of the first deployed run against time, with the chamber cut marked (Fig 4.26-B).
+fn plot_error_over_time(
+    out: &Path,
+    task: TaskKind,
+    label: &str,
+    plant: &str,
+    deploy: &DeployArgs,
+    r: &EvalReport,
+) -> anyhow::Result<()> {
+    let dt = 1.0 / deploy.command_rate_hz;
+    let err: Vec<(f64, f64)> = r
+        .first_episode
+        .iter()
+        .enumerate()
+        .map(|(i, s)| ((i + 1) as f64 * dt, s.position_error_m * 1e3))
+        .collect();
+    let top = err.iter().map(|p| p.1).fold(0.0, f64::max);
+    let mut series = vec![Series {
+        label: format!("{plant}: TCP error ({label})"),
+        points: err,
+        dots: false,
+    }];
+    if let Some(c) = deploy.disconnect_chamber {
+        let (a, b) = (
+            deploy.disconnect_at_s,
+            deploy.disconnect_at_s + deploy.disconnect_for_s,
+        );
+        series.push(Series {
+            label: format!("chamber {c} vented"),
+            points: vec![(a, 0.0), (a, top), (b, top), (b, 0.0)],
+            dots: false,
+        });
+    }
+    Chart {
+        title: &format!("{} on the {plant} plant: TCP error over time", task.name()),
+        x_label: "time (s)",
+        y_label: "TCP error (mm)",
+        series,
+        equal_axes: false,
+    }
+    .write(out, "error_time")
 }
 
 fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {
@@ -304,11 +466,30 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
             envs,
             threads,
             eval_episodes,
+            init_from,
+            std,
+            learning_rate,
+            critic_warmup,
+            pretrain_steps,
+            bc_weight,
             out,
             json,
         } => {
             let robot = robot(&model)?;
             let kind = task.kind();
+            if init_from.is_some() && matches!(algo, Algorithm::Bc) {
+                anyhow::bail!(
+                    "--init-from starts PPO or SAC from a policy; BC learns from the expert"
+                );
+            }
+            let (std_start, std_end) = match (&std, &init_from) {
+                (Some(v), _) => (v[0], v[1]),
+                (None, Some(_)) => (0.05, 0.02),
+                (None, None) => {
+                    let d = PpoConfig::default();
+                    (d.std_start, d.std_end)
+                }
+            };
             let cfg = EnvConfig::new(kind);
             mkdir(&out)?;
             let t0 = std::time::Instant::now();
@@ -343,6 +524,11 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                         envs,
                         seed,
                         threads,
+                        std_start,
+                        std_end,
+                        init_from: init_from.clone(),
+                        critic_warmup,
+                        learning_rate: learning_rate.unwrap_or(PpoConfig::default().learning_rate),
                         ..PpoConfig::default()
                     };
                     let b = if json {
@@ -370,6 +556,11 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                         envs,
                         seed,
                         threads,
+                        init_from: init_from.clone(),
+                        pretrain_steps,
+                        critic_warmup,
+                        bc_weight,
+                        learning_rate: learning_rate.unwrap_or(SacConfig::default().learning_rate),
                         ..SacConfig::default()
                     };
                     let b = if json {
@@ -400,12 +591,13 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                 score: report.episode_return.mean,
             };
             policy.save(&out.join("policy.ckpt"), &meta)?;
-            plot_episode(&out, kind, name, &report)?;
+            plot_episode(&out, kind, name, "surrogate", &report)?;
             let v = serde_json::json!({
                 "task": kind.name(),
                 "algorithm": name,
                 "seed": seed,
                 "train_seconds": train_s,
+                "init_from": init_from,
                 "eval": summary(&report),
                 "policy": out.join("policy.ckpt"),
             });
@@ -425,6 +617,7 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
             seed,
             out,
             json,
+            deploy,
         } => {
             let robot = robot(&model)?;
             let loaded = match &policy {
@@ -439,26 +632,92 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                     .with_context(|| format!("policy names an unknown task '{}'", m.task))?,
                 (None, None) => anyhow::bail!("give --task or --policy"),
             };
-            let mut env = Env::new(robot.clone(), EnvConfig::new(kind))?;
-            let (report, who) = match &loaded {
-                Some((p, m)) => (
-                    evaluate(&mut env, episodes, seed, |_, o| p.act(o))?,
-                    m.algorithm.clone(),
-                ),
-                None => (
-                    evaluate(&mut env, episodes, seed, |e, _| e.expert_action())?,
-                    "expert".to_string(),
-                ),
+            let who = loaded
+                .as_ref()
+                .map_or("expert".to_string(), |(_, m)| m.algorithm.clone());
+            let cfg = EnvConfig::new(kind);
+            let episode = |s: u64| match deploy.path {
+                PathArg::Task => Episode::new(kind, &robot.rest_tcp(), &cfg.contact, s),
+                PathArg::FigureEight => Episode::figure_eight(&robot.rest_tcp(), &cfg.contact, s),
             };
+            let (report, extra) = if deploy.plant == PlantArg::Surrogate {
+                let mut env = Env::new(robot.clone(), cfg)?;
+                let mut n = 0u64;
+                let mut next = |env: &mut Env| {
+                    let o = env.reset_with(episode(seed + n), seed + n);
+                    n += 1;
+                    o
+                };
+                let r = match &loaded {
+                    Some((p, _)) => {
+                        evaluate_episodes(&mut env, episodes, &mut next, |_, o| p.act(o))?
+                    }
+                    None => {
+                        evaluate_episodes(&mut env, episodes, &mut next, |e, _| e.expert_action())?
+                    }
+                };
+                (r, serde_json::Value::Null)
+            } else {
+                let sm = SurrogateModel::read(&model)
+                    .with_context(|| format!("reading {}", model.display()))?;
+                let tcfg = deploy.config()?;
+                let mut expert = transfer::expert_actor(&robot);
+                let mut act = |ep: &Episode, o: &[f64], k: usize| match &loaded {
+                    Some((p, _)) => p.act(o),
+                    None => expert(ep, o, k),
+                };
+                let t0 = std::time::Instant::now();
+                let r = match deploy.plant {
+                    PlantArg::Reduced => {
+                        let dir = deploy
+                            .rom
+                            .as_ref()
+                            .context("--plant reduced needs --rom DIR (ocm mor pod + reduce)")?;
+                        let mesh = data_path(deploy.mesh.clone(), None, BELLOWS_MESH)?;
+                        let g = if deploy.rom_gravity {
+                            robot.gravity_m_s2()
+                        } else {
+                            0.0
+                        };
+                        let assets = RomAssets::load(dir, &mesh, g)?;
+                        let mut plant = assets.plant(deploy.rom_dt_s, robot.gravity_m_s2())?;
+                        evaluate_on_plant(
+                            &mut plant, &sm.map, &robot, &tcfg, episodes, seed, &episode, &mut act,
+                        )?
+                    }
+                    _ => {
+                        let mut plant = SurrogatePlant::new(robot.clone(), &sm.map)?;
+                        evaluate_on_plant(
+                            &mut plant, &sm.map, &robot, &tcfg, episodes, seed, &episode, &mut act,
+                        )?
+                    }
+                };
+                let extra = serde_json::json!({
+                    "plant": r.plant,
+                    "settings": r.config,
+                    "disconnect": r.disconnect,
+                    "wall_seconds": t0.elapsed().as_secs_f64(),
+                });
+                (r.eval, extra)
+            };
+            let mut v = summary(&report);
+            v["deployment"] = extra.clone();
             if let Some(out) = &out {
                 mkdir(out)?;
-                plot_episode(out, kind, &who, &report)?;
-                write_json(&out.join("eval.json"), &summary(&report))?;
+                let plant = extra["plant"].as_str().unwrap_or("surrogate");
+                plot_episode(out, kind, &who, plant, &report)?;
+                if !extra.is_null() {
+                    plot_error_over_time(out, kind, &who, plant, &deploy, &report)?;
+                }
+                write_json(&out.join("eval.json"), &v)?;
             }
             if json {
-                println!("{}", serde_json::to_string_pretty(&summary(&report))?);
+                println!("{}", serde_json::to_string_pretty(&v)?);
             } else {
                 print_eval(kind, &who, &report);
+                if !extra.is_null() {
+                    println!("{}", serde_json::to_string_pretty(&extra)?);
+                }
             }
         }
         RlCommand::Bench {

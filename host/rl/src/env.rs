@@ -150,6 +150,50 @@ fn scaled_joint(j: usize, q: f64, robot: &Robot) -> f64 {
     (q - 0.5 * (lo + hi)) / (0.5 * (hi - lo))
 }
 
+/// What a policy observes of a plant: joints, TCP and the force of the surroundings.
+#[derive(Debug, Clone, Copy)]
+pub struct ObservedState<'a> {
+    /// Joint positions (rad, m).
+    pub q: &'a [f64; N_JOINTS],
+    /// Joint velocities (rad/s, m/s).
+    pub dq: &'a [f64; N_JOINTS],
+    /// TCP, m.
+    pub tcp_m: Vector3<f64>,
+    /// TCP velocity, m/s.
+    pub tcp_velocity_m_s: Vector3<f64>,
+    /// Force of the surroundings on the TCP, N.
+    pub force_n: Vector3<f64>,
+}
+
+/// The 40 observation values ([`OBS_NAMES`]) of a state and the next target: the one scaling
+/// that the environments and the deployment on other plants (`transfer`) share.
+pub fn observation_of(
+    robot: &Robot,
+    s: &ObservedState,
+    target: &Vector3<f64>,
+    force_target: &Vector3<f64>,
+) -> Vec<f64> {
+    let rest = robot.rest_tcp();
+    let (p, v) = (s.tcp_m, s.tcp_velocity_m_s);
+    let mut o = Vec::with_capacity(OBS_DIM);
+    for j in 0..N_JOINTS {
+        o.push(scaled_joint(j, s.q[j], robot));
+    }
+    for (kind, v) in KINDS.iter().zip(s.dq.iter()) {
+        o.push(match kind {
+            JointKind::Prismatic => v / 0.1,
+            _ => *v,
+        });
+    }
+    o.extend(((p - rest) / POS_SCALE_M).iter());
+    o.extend((v / VEL_SCALE_M_S).iter());
+    o.extend((s.force_n / FORCE_SCALE_N).iter());
+    o.extend(((target - rest) / POS_SCALE_M).iter());
+    o.extend(((target - p) / OFFSET_SCALE_M).iter());
+    o.extend((force_target / FORCE_SCALE_N).iter());
+    o
+}
+
 impl Env {
     /// An environment of `robot` with `config` (reset it before stepping).
     pub fn new(robot: Arc<Robot>, config: EnvConfig) -> Result<Self> {
@@ -226,15 +270,28 @@ impl Env {
     /// rest at the static equilibrium of the expert's command for the first target, perturbed by
     /// seeded noise (force task: 5 mm below the plate, out of contact).
     pub fn reset(&mut self, seed: u64) -> Result<Vec<f64>> {
-        let robot = self.robot.clone();
         let ep = Episode::new(
             self.config.task,
-            &robot.rest_tcp(),
+            &self.robot.rest_tcp(),
             &self.config.contact,
             seed,
         );
+        self.reset_with(ep, seed)
+    }
+
+    /// Starts the given episode (an unseen path such as [`Episode::figure_eight`]); `seed`
+    /// draws the perturbation of the first command as in [`Env::reset`].
+    pub fn reset_with(&mut self, ep: Episode, seed: u64) -> Result<Vec<f64>> {
+        if ep.targets.len() != POINTS || ep.force_targets.len() != POINTS {
+            return Err(RlError::Invalid(format!(
+                "an episode has {POINTS} targets and force targets, not {} and {}",
+                ep.targets.len(),
+                ep.force_targets.len()
+            )));
+        }
+        let robot = self.robot.clone();
         let gravity = robot.gravity_m_s2();
-        let (start_tcp, start_force) = if self.config.task == TaskKind::Force {
+        let (start_tcp, start_force) = if ep.task == TaskKind::Force {
             (
                 ep.targets[0] - Vector3::new(0.0, 0.0, 0.005),
                 Vector3::zeros(),
@@ -272,29 +329,20 @@ impl Env {
         let (Some(s), Some(ep)) = (&self.state, &self.episode) else {
             return vec![0.0; OBS_DIM];
         };
-        let robot = &self.robot;
-        let rest = robot.rest_tcp();
-        let (p, v) = robot.tcp_and_velocity(s);
+        let (p, v) = self.robot.tcp_and_velocity(s);
         let k = self.point.min(POINTS - 1);
-        let target = ep.targets[k];
-        let ft = ep.force_targets[k];
-        let mut o = Vec::with_capacity(OBS_DIM);
-        for j in 0..N_JOINTS {
-            o.push(scaled_joint(j, s.q[j], robot));
-        }
-        for (kind, v) in KINDS.iter().zip(s.v.iter()) {
-            o.push(match kind {
-                JointKind::Prismatic => v / 0.1,
-                _ => *v,
-            });
-        }
-        o.extend(((p - rest) / POS_SCALE_M).iter());
-        o.extend((v / VEL_SCALE_M_S).iter());
-        o.extend((self.force / FORCE_SCALE_N).iter());
-        o.extend(((target - rest) / POS_SCALE_M).iter());
-        o.extend(((target - p) / OFFSET_SCALE_M).iter());
-        o.extend((ft / FORCE_SCALE_N).iter());
-        o
+        observation_of(
+            &self.robot,
+            &ObservedState {
+                q: &s.q,
+                dq: &s.v,
+                tcp_m: p,
+                tcp_velocity_m_s: v,
+                force_n: self.force,
+            },
+            &ep.targets[k],
+            &ep.force_targets[k],
+        )
     }
 
     /// The expert's action for the next target (eq 4.31's inverse model: the inverse of the

@@ -55,13 +55,30 @@ pub fn evaluate(
     env: &mut Env,
     episodes: usize,
     seed: u64,
+    act: impl FnMut(&mut Env, &[f64]) -> Result<[f64; 3]>,
+) -> Result<EvalReport> {
+    let mut e = 0u64;
+    let mut start = |env: &mut Env| {
+        let o = env.reset(seed.wrapping_add(e));
+        e += 1;
+        o
+    };
+    evaluate_episodes(env, episodes, &mut start, act)
+}
+
+/// Runs `episodes` episodes, each begun by `start` (a reset, or [`Env::reset_with`] for other
+/// paths), choosing actions with `act(env, obs)`.
+pub fn evaluate_episodes(
+    env: &mut Env,
+    episodes: usize,
+    start: &mut dyn FnMut(&mut Env) -> Result<Vec<f64>>,
     mut act: impl FnMut(&mut Env, &[f64]) -> Result<[f64; 3]>,
 ) -> Result<EvalReport> {
     let (mut pos, mut force, mut returns) = (vec![], vec![], vec![]);
     let mut failures = 0;
     let mut first = vec![];
     for e in 0..episodes {
-        let mut obs = env.reset(seed.wrapping_add(e as u64))?;
+        let mut obs = start(env)?;
         let mut ret = 0.0;
         loop {
             let a = act(env, &obs)?;

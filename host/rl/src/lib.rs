@@ -6,6 +6,8 @@
 //! - [`tasks`], [`reward`], [`env`], [`vec_env`]: the Gymnasium-style environments.
 //! - [`policy`], [`bc`], [`ppo`], [`sac`]: policies and their training; [`eval`]: 100-point evaluation;
 //!   [`bench`]: throughput.
+//! - [`transfer`]: deployment on the reduced FEM (or the surrogate in pressure space) through
+//!   the inverse actuation map, with the chamber-disconnect test.
 
 pub mod error;
 pub use error::{Result, RlError};
@@ -19,4 +21,5 @@ pub mod reward;
 pub mod robot;
 pub mod sac;
 pub mod tasks;
+pub mod transfer;
 pub mod vec_env;

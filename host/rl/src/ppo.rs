@@ -22,6 +22,7 @@ use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -63,6 +64,15 @@ pub struct PpoConfig {
     pub eval_every: usize,
     /// Episodes per evaluation.
     pub eval_episodes: usize,
+    /// Start the policy from this checkpoint (a BC policy of the same shape) instead of random
+    /// weights; the untouched start is scored too, so the kept policy is never worse on the
+    /// evaluation episodes.
+    #[serde(default)]
+    pub init_from: Option<PathBuf>,
+    /// Iterations at the start in which only the value network learns (the policy is held), so
+    /// that a warm-started policy is not pushed around by an untrained critic.
+    #[serde(default)]
+    pub critic_warmup: usize,
 }
 
 impl Default for PpoConfig {
@@ -84,6 +94,8 @@ impl Default for PpoConfig {
             threads: 2,
             eval_every: 5,
             eval_episodes: 2,
+            init_from: None,
+            critic_warmup: 0,
         }
     }
 }
@@ -186,7 +198,10 @@ pub fn train(
         output: 1,
         activation: Activation::Tanh,
     };
-    let mut actor = pcfg.init(&device, cfg.seed);
+    let mut actor = match &cfg.init_from {
+        Some(path) => load_actor(path, &pcfg, &device, cfg.seed)?,
+        None => pcfg.init(&device, cfg.seed),
+    };
     let mut critic = vcfg.init(&device, cfg.seed ^ 0x0c41_71c0);
     let mut opt_a = AdamConfig::new().init();
     let mut opt_c = AdamConfig::new().init();
@@ -198,6 +213,22 @@ pub fn train(
     let mut curve = vec![];
     let mut best: Option<(f64, Policy)> = None;
     let mut steps_done = 0;
+    if cfg.init_from.is_some() {
+        let p = Policy::new(actor.valid(), pcfg.clone());
+        let (r, pe, fe) = score(robot, env_cfg, &p, cfg.eval_episodes.max(1))?;
+        let rec = RlRecord {
+            iteration: 0,
+            env_steps: 0,
+            mean_reward: f64::NAN,
+            eval_return: r,
+            eval_position_error_mm: pe,
+            eval_force_error_n: fe,
+            elapsed_s: start.elapsed().as_secs_f64(),
+        };
+        best = Some((r, p));
+        on_iteration(&rec);
+        curve.push(rec);
+    }
     for it in 1..=cfg.iterations {
         let frac = (it - 1) as f64 / (cfg.iterations.max(2) - 1) as f64;
         let std = cfg.std_start + (cfg.std_end - cfg.std_start) * frac;
@@ -301,9 +332,11 @@ pub fn train(
                 let ratio = (logp - old).exp();
                 let s1 = ratio.clone() * ad.clone();
                 let s2 = ratio.clamp(1.0 - cfg.clip as f32, 1.0 + cfg.clip as f32) * ad;
-                let loss_a = s1.min_pair(s2).mean().neg();
-                let grads = GradientsParams::from_grads(loss_a.backward(), &actor);
-                actor = opt_a.step(cfg.learning_rate, actor, grads);
+                if it > cfg.critic_warmup {
+                    let loss_a = s1.min_pair(s2).mean().neg();
+                    let grads = GradientsParams::from_grads(loss_a.backward(), &actor);
+                    actor = opt_a.step(cfg.learning_rate, actor, grads);
+                }
                 let dv: Tensor<2> = critic.forward(x) - rt;
                 let loss_c = (dv.clone() * dv).mean();
                 let grads = GradientsParams::from_grads(loss_c.backward(), &critic);
@@ -335,4 +368,15 @@ pub fn train(
     }
     let (_, policy) = best.ok_or_else(|| RlError::Invalid("no evaluation ran".into()))?;
     Ok((policy, curve))
+}
+
+/// The policy network of a saved policy checkpoint, on the training device (warm start).
+pub fn load_actor(
+    path: &std::path::Path,
+    pcfg: &MlpConfig,
+    device: &ocm_learn::burn::tensor::Device,
+    seed: u64,
+) -> Result<Mlp> {
+    let ck = ocm_learn::Checkpoint::read(path)?;
+    Ok(ck.load_into(pcfg.init(device, seed), crate::policy::ARCHITECTURE, pcfg)?)
 }

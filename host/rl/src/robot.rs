@@ -37,6 +37,18 @@ pub enum Load {
         /// Contact damping, N s/m (only while pressing; the force never pulls).
         damping_n_s_m: f64,
     },
+    /// A rigid ball the TCP presses into from below (a curved surface, Fig 4.26-A), with the
+    /// plane's penalty law along the local normal.
+    Sphere {
+        /// Centre, m.
+        centre_m: [f64; 3],
+        /// Radius, m.
+        radius_m: f64,
+        /// Contact stiffness, N/m.
+        stiffness_n_m: f64,
+        /// Contact damping, N s/m.
+        damping_n_s_m: f64,
+    },
 }
 
 impl Load {
@@ -59,6 +71,41 @@ impl Load {
                 let f = (stiffness_n_m * depth - damping_n_s_m * n.dot(v)).max(0.0);
                 n * f
             }
+            Load::Sphere {
+                centre_m,
+                radius_m,
+                stiffness_n_m,
+                damping_n_s_m,
+            } => {
+                let d = p - Vector3::from(centre_m);
+                let dist = d.norm();
+                let depth = radius_m - dist;
+                if depth <= 0.0 || dist == 0.0 {
+                    return Vector3::zeros();
+                }
+                let n = d / dist;
+                let f = (stiffness_n_m * depth - damping_n_s_m * n.dot(v)).max(0.0);
+                n * f
+            }
+        }
+    }
+
+    /// Outward unit normal of a contact surface at (or nearest to) `p`; `None` without one.
+    pub fn surface_normal(&self, p: &Vector3<f64>) -> Option<Vector3<f64>> {
+        match *self {
+            Load::Plane { normal, .. } => Some(Vector3::from(normal)),
+            Load::Sphere { centre_m, .. } => (p - Vector3::from(centre_m)).try_normalize(0.0),
+            _ => None,
+        }
+    }
+
+    /// Penalty stiffness of a contact surface, N/m (`None` without one).
+    pub fn contact_stiffness(&self) -> Option<f64> {
+        match *self {
+            Load::Plane { stiffness_n_m, .. } | Load::Sphere { stiffness_n_m, .. } => {
+                Some(stiffness_n_m)
+            }
+            _ => None,
         }
     }
 }

@@ -19,6 +19,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -51,6 +52,24 @@ pub struct SacConfig {
     pub eval_every: usize,
     /// Episodes per evaluation.
     pub eval_episodes: usize,
+    /// A BC policy checkpoint to start from: it acts (with Gaussian noise of `init_noise`)
+    /// during the warm-up, the actor's mean is fitted to it on the warm-up data before the SAC
+    /// updates begin, and it anchors the actor with `bc_weight`.
+    #[serde(default)]
+    pub init_from: Option<PathBuf>,
+    /// Noise of the warm-up actions around the initial policy, action units.
+    #[serde(default)]
+    pub init_noise: f64,
+    /// Gradient steps fitting the actor's tanh(mean) to the initial policy after the warm-up.
+    #[serde(default)]
+    pub pretrain_steps: usize,
+    /// Vector steps after the warm-up in which only the Q networks learn.
+    #[serde(default)]
+    pub critic_warmup: usize,
+    /// Weight of the squared distance between tanh(mean) and the initial policy's action in the
+    /// actor loss (0: plain SAC after the start).
+    #[serde(default)]
+    pub bc_weight: f64,
 }
 
 impl Default for SacConfig {
@@ -69,6 +88,11 @@ impl Default for SacConfig {
             threads: 2,
             eval_every: 500,
             eval_episodes: 2,
+            init_from: None,
+            init_noise: 0.1,
+            pretrain_steps: 0,
+            critic_warmup: 0,
+            bc_weight: 0.0,
         }
     }
 }
@@ -164,11 +188,44 @@ pub fn train(
     let mut curve = vec![];
     let mut best: Option<(f64, Policy)> = None;
     let mut rewards_since = (0.0, 0usize);
+    let teacher = match &cfg.init_from {
+        Some(p) => Some(Policy::load(p)?.0),
+        None => None,
+    };
+    // The teacher's actions on rows of the replay buffer, as a tensor on `device`.
+    let teach =
+        |t: &Policy, rows_obs: &[f32], idx: &[usize], device: &Device| -> Result<Tensor<2>> {
+            let mut o = Vec::with_capacity(idx.len() * OBS_DIM);
+            for &i in idx {
+                o.extend(
+                    rows_obs[i * OBS_DIM..(i + 1) * OBS_DIM]
+                        .iter()
+                        .map(|&v| f64::from(v)),
+                );
+            }
+            let a = t.act_batch(&o)?;
+            Ok(ocm_learn::tensor2(
+                a.iter().map(|&v| v as f32).collect(),
+                idx.len(),
+                ACT_DIM,
+                device,
+            ))
+        };
     for step in 1..=cfg.steps {
         let acts: Vec<f64> = if step <= cfg.warmup {
-            (0..n * ACT_DIM)
-                .map(|_| rng.random_range(-1.0..1.0))
-                .collect()
+            match &teacher {
+                Some(t) => t
+                    .act_batch(&obs)?
+                    .into_iter()
+                    .map(|a| {
+                        let e: f64 = StandardNormal.sample(&mut rng);
+                        (a + cfg.init_noise * e).clamp(-1.0, 1.0)
+                    })
+                    .collect(),
+                None => (0..n * ACT_DIM)
+                    .map(|_| rng.random_range(-1.0..1.0))
+                    .collect(),
+            }
         } else {
             let x = ocm_learn::tensor2(obs.iter().map(|&v| v as f32).collect(), n, OBS_DIM, &plain);
             let eps = normals(&mut rng, n, &plain);
@@ -197,6 +254,21 @@ pub fn train(
             rewards_since.1 += 1;
         }
         obs = s.obs;
+        if step == cfg.warmup.max(1)
+            && let Some(t) = &teacher
+        {
+            // Fit tanh(mean) of the actor to the teacher on the warm-up states.
+            for _ in 0..cfg.pretrain_steps {
+                let idx = sample(&mut rng, buf.len(), cfg.batch.min(buf.len())).into_vec();
+                let o = rows(&buf.obs, OBS_DIM, &idx, &device);
+                let target = teach(t, &buf.obs, &idx, &device)?;
+                let mean = activation::tanh(actor.forward(o).narrow(1, 0, ACT_DIM));
+                let d = mean - target;
+                let loss = (d.clone() * d).mean();
+                let g = GradientsParams::from_grads(loss.backward(), &actor);
+                actor = opt_a.step(cfg.learning_rate, actor, g);
+            }
+        }
         if step > cfg.warmup && buf.len() >= cfg.batch {
             let idx = sample(&mut rng, buf.len(), cfg.batch).into_vec();
             let m = idx.len();
@@ -225,11 +297,20 @@ pub fn train(
             let g = GradientsParams::from_grads(l2.backward(), &q2);
             q2 = opt_q2.step(cfg.learning_rate, q2, g);
             // Actor: alpha log pi(a|s) - min Q(s, a), a reparameterised.
+            let o_actor = o.clone();
             let (an, logp) = sample_action(actor.forward(o.clone()), normals(&mut rng, m, &device));
             let qa = q_of(&q1, o.clone(), an.clone()).min_pair(q_of(&q2, o, an));
-            let la = (logp.mul_scalar(alpha) - qa).mean();
-            let g = GradientsParams::from_grads(la.backward(), &actor);
-            actor = opt_a.step(cfg.learning_rate, actor, g);
+            let mut la = (logp.mul_scalar(alpha) - qa).mean();
+            if step > cfg.warmup + cfg.critic_warmup {
+                if let (Some(t), true) = (&teacher, cfg.bc_weight > 0.0) {
+                    let target = teach(t, &buf.obs, &idx, &device)?;
+                    let mean = activation::tanh(actor.forward(o_actor).narrow(1, 0, ACT_DIM));
+                    let d = mean - target;
+                    la = la + (d.clone() * d).mean().mul_scalar(cfg.bc_weight as f32);
+                }
+                let g = GradientsParams::from_grads(la.backward(), &actor);
+                actor = opt_a.step(cfg.learning_rate, actor, g);
+            }
             if step % cfg.target_every.max(1) == 0 {
                 t1 = q1.valid();
                 t2 = q2.valid();

@@ -239,29 +239,68 @@ impl Episode {
         }
     }
 
+    /// The unseen path of Ch.4.10.4 (Fig 4.26-A): a figure-eight on a curved surface, pressed
+    /// with 1 N along the surface normal. The surface is the underside of a ball of radius
+    /// [`FIGURE_EIGHT_BALL_RADIUS_M`] whose lowest point is [`PATH_LIFT_M`] above the rest TCP
+    /// `origin`; the path is the lemniscate of Gerono x = 25 sin t, y = 12.5 sin 2t (mm) lifted
+    /// onto that surface, starting at a seeded point. Scored as Task 3 (alpha = 0.5).
+    pub fn figure_eight(origin: &Vector3<f64>, contact: &ContactConfig, seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let start = rng.random_range(0..POINTS);
+        let r = FIGURE_EIGHT_BALL_RADIUS_M;
+        let centre = origin + Vector3::new(0.0, 0.0, PATH_LIFT_M + r);
+        let targets = rotate(figure_eight(&centre, r, POINTS), start);
+        let force_targets = targets.iter().map(|p| (p - centre).normalize()).collect();
+        Episode {
+            task: TaskKind::Ellipse,
+            targets,
+            force_targets,
+            load: Load::Sphere {
+                centre_m: [centre.x, centre.y, centre.z],
+                radius_m: r,
+                stiffness_n_m: contact.stiffness_n_m,
+                damping_n_s_m: contact.damping_n_s_m,
+            },
+        }
+    }
+
     /// The force the expert plans with at step `k`: the weight, or the target contact force.
     pub fn planned_force(&self, k: usize, gravity_m_s2: f64) -> Vector3<f64> {
         match self.load {
             Load::Free => Vector3::zeros(),
             Load::Weight { mass_kg } => Vector3::new(0.0, 0.0, -mass_kg * gravity_m_s2),
-            Load::Plane { .. } => self.force_targets[k],
+            Load::Plane { .. } | Load::Sphere { .. } => self.force_targets[k],
         }
     }
 
-    /// Where the expert puts the TCP at step `k`: the target, pressed into a plate by the depth
-    /// at which the penalty spring gives the target force.
+    /// Where the expert puts the TCP at step `k`: the target, pressed into the surface by the
+    /// depth at which the penalty spring gives the target force.
     pub fn planned_tcp(&self, k: usize) -> Vector3<f64> {
-        match self.load {
-            Load::Plane {
-                normal,
-                stiffness_n_m,
-                ..
-            } => {
-                let n = Vector3::from(normal);
-                let depth = n.dot(&self.force_targets[k]).max(0.0) / stiffness_n_m;
-                self.targets[k] - n * depth
+        let t = self.targets[k];
+        match (self.load.surface_normal(&t), self.load.contact_stiffness()) {
+            (Some(n), Some(k_n_m)) => {
+                let depth = n.dot(&self.force_targets[k]).max(0.0) / k_n_m;
+                t - n * depth
             }
-            _ => self.targets[k],
+            _ => t,
         }
     }
+}
+
+/// Radius of the ball whose underside carries the figure-eight, m.
+pub const FIGURE_EIGHT_BALL_RADIUS_M: f64 = 0.1;
+
+/// `n` points of the lemniscate of Gerono (x = 25 sin t, y = 12.5 sin 2t, mm) on the lower
+/// surface of the ball of radius `r` about `centre`, t from 0.
+pub fn figure_eight(centre: &Vector3<f64>, r: f64, n: usize) -> Vec<Vector3<f64>> {
+    (0..n)
+        .map(|k| {
+            let t = 2.0 * PI * k as f64 / n as f64;
+            let (x, y) = (
+                PATH_RADIUS_M * t.sin(),
+                0.5 * PATH_RADIUS_M * (2.0 * t).sin(),
+            );
+            centre + Vector3::new(x, y, -(r * r - x * x - y * y).sqrt())
+        })
+        .collect()
 }

@@ -150,3 +150,84 @@ fn sac_is_seeded_and_its_policy_acts_in_bounds() {
     assert_eq!(a, p2.act(&obs).unwrap());
     assert!(a.iter().all(|v| v.abs() < 1.0));
 }
+
+/// PPO and SAC warm-started from a saved BC policy: PPO starts at exactly that policy (scored as
+/// iteration 0, and kept while the actor is held), SAC's actor is fitted to it before any SAC
+/// update.
+#[test]
+fn ppo_and_sac_start_from_a_saved_policy() {
+    let r = robot();
+    let cfg = EnvConfig::new(TaskKind::Circle);
+    let demos = bc::collect(&r, &cfg, 4, 0.03, 0, 2).unwrap();
+    let mut t = quick_train();
+    t.epochs = 20;
+    let (teacher, _) = bc::fit(&demos, &[16], &t, 0).unwrap();
+    let dir = std::env::temp_dir().join(format!("ocm-rl-init-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("bc.ckpt");
+    let meta = PolicyMeta {
+        task: "circle".into(),
+        algorithm: "bc".into(),
+        seed: 0,
+        score: 0.0,
+    };
+    teacher.save(&path, &meta).unwrap();
+    let obs: Vec<f64> = demos.obs[..40 * 200]
+        .iter()
+        .map(|&v| f64::from(v))
+        .collect();
+    let want = teacher.act_batch(&obs).unwrap();
+    let ppo_cfg = PpoConfig {
+        iterations: 2,
+        envs: 2,
+        horizon: 16,
+        epochs: 2,
+        minibatch: 16,
+        hidden: vec![16],
+        eval_every: 1,
+        eval_episodes: 1,
+        init_from: Some(path.clone()),
+        critic_warmup: 2,
+        ..PpoConfig::default()
+    };
+    let (p, curve) = ppo::train(&r, &cfg, &ppo_cfg, |_| {}).unwrap();
+    let (start_return, _, _) = ppo::score(&r, &cfg, &teacher, 1).unwrap();
+    assert_eq!(curve[0].iteration, 0);
+    assert_eq!(curve[0].eval_return, start_return);
+    assert_eq!(p.act_batch(&obs).unwrap(), want);
+    // A network of another shape is refused, naming the file.
+    let wrong = PpoConfig {
+        hidden: vec![8],
+        ..ppo_cfg
+    };
+    let e = ppo::train(&r, &cfg, &wrong, |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("bc.ckpt"), "{e}");
+    let sac_cfg = SacConfig {
+        steps: 101,
+        envs: 2,
+        warmup: 100,
+        batch: 64,
+        hidden: vec![32, 32],
+        eval_every: 101,
+        eval_episodes: 1,
+        init_from: Some(path.clone()),
+        pretrain_steps: 400,
+        critic_warmup: 100,
+        learning_rate: 3e-3,
+        ..SacConfig::default()
+    };
+    let (s, _) = sac::train(&r, &cfg, &sac_cfg, |_| {}).unwrap();
+    let got = s.act_batch(&obs).unwrap();
+    let gap = got
+        .iter()
+        .zip(&want)
+        .map(|(a, b)| (a - b).abs())
+        .sum::<f64>()
+        / want.len() as f64;
+    let spread = want.iter().map(|a| a.abs()).sum::<f64>() / want.len() as f64;
+    eprintln!("SAC actor after fitting: mean |a - a_bc| {gap:.4} (mean |a_bc| {spread:.3})");
+    assert!(gap < 0.2 * spread, "{gap} vs {spread}");
+    std::fs::remove_dir_all(&dir).ok();
+}
