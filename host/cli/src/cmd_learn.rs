@@ -344,6 +344,8 @@ fn run_bench(a: BenchArgs) -> Result<()> {
         let v: Vec<f32> = (0..b * m * f).map(|i| ((i as f32) * 0.37).sin()).collect();
         Tensor::<3>::from_data(TensorData::new(v, [b, m, f]), &device)
     };
+    let raw =
+        |b: usize| -> Vec<f32> { (0..b * m * f).map(|i| ((i as f32) * 0.37).sin()).collect() };
     let run = |b: usize, reps: usize| -> Vec<f64> {
         (0..reps)
             .map(|_| {
@@ -355,6 +357,18 @@ fn run_bench(a: BenchArgs) -> Result<()> {
             })
             .collect()
     };
+    let dense = fwd.model.dense()?;
+    let run_dense = |b: usize, reps: usize| -> Result<Vec<f64>> {
+        let x = raw(b);
+        (0..reps)
+            .map(|_| {
+                let t = Instant::now();
+                let y = dense.forward(&x, b, m)?;
+                std::hint::black_box(y);
+                Ok(t.elapsed().as_secs_f64())
+            })
+            .collect()
+    };
     let median = |mut v: Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
@@ -363,17 +377,29 @@ fn run_bench(a: BenchArgs) -> Result<()> {
     let single_s = median(run(1, 300));
     run(a.batch, 2);
     let batched_s = median(run(a.batch, 15));
+    run_dense(1, 20)?;
+    let dense_single_s = median(run_dense(1, 300)?);
+    run_dense(a.batch, 2)?;
+    let dense_batched_s = median(run_dense(a.batch, 15)?);
     let s = serde_json::json!({
-        "batch1_step_ms": 1e3 * single_s,
+        "batch1_step_ms": 1e3 * dense_single_s,
         "batch": a.batch,
-        "batched_steps_per_s": a.batch as f64 / batched_s,
+        "batched_steps_per_s": a.batch as f64 / dense_batched_s,
+        "burn_batch1_step_ms": 1e3 * single_s,
+        "burn_batched_steps_per_s": a.batch as f64 / batched_s,
         "threads": std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
     });
     if a.json {
         println!("{}", serde_json::to_string_pretty(&s)?);
     } else {
         println!(
-            "forward model: {:.3} ms per step at batch 1, {:.0} steps/s at batch {}",
+            "forward model, plain arrays: {:.3} ms per step at batch 1, {:.0} steps/s at batch {}",
+            1e3 * dense_single_s,
+            a.batch as f64 / dense_batched_s,
+            a.batch
+        );
+        println!(
+            "forward model, burn tensors: {:.3} ms per step at batch 1, {:.0} steps/s at batch {}",
             1e3 * single_s,
             a.batch as f64 / batched_s,
             a.batch

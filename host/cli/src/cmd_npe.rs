@@ -50,6 +50,10 @@ pub enum NpeCommand {
         /// Seen set-ups held out for validation (early stopping).
         #[arg(long, default_value_t = 5)]
         val_setups: usize,
+        /// Weight of the resultant term of the loss: squared error of the summed nodal force,
+        /// N^2 (0: eq 6.17 alone).
+        #[arg(long, default_value_t = 0.0)]
+        lambda_total: f64,
         /// Leave the contact points out (the ablation without geometry).
         #[arg(long)]
         no_geometry: bool,
@@ -178,6 +182,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             seed,
             test_setups,
             val_setups,
+            lambda_total,
             no_geometry,
             no_force,
             json,
@@ -196,6 +201,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
                 use_force: !no_force,
                 width,
                 layers,
+                lambda_total,
                 test_setups,
                 val_setups,
                 progress: !json,

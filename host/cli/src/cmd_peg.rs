@@ -4,11 +4,11 @@
 use crate::plot::{Chart, Series};
 use crate::progress::bar;
 use anyhow::Context;
-use ocm_peg::replay::{read_path, replay, write_frames};
+use ocm_peg::replay::{npe_fields, read_path, replay, write_frames, write_npe_fields};
 use ocm_peg::{
     ActionNoise, BcConfig, BcPolicy, ContactFeatures, DemoSet, DemoSettings, Evaluation,
-    ExpertConfig, InHandError, Randomisation, SceneConfig, TrialSpec, evaluate_expert,
-    evaluate_policy, train_bc,
+    ExpertConfig, InHandError, NpeEncoder, Randomisation, SceneConfig, TactileEncoder, TrialSpec,
+    evaluate_expert, evaluate_policy, train_bc,
 };
 use std::path::{Path, PathBuf};
 
@@ -28,6 +28,11 @@ pub enum PegCommand {
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
+        /// Tactile latents from this trained neural physics engine (`ocm npe train`'s
+        /// npe.ckpt: its global contact code h_global per pad) instead of the raw contact
+        /// features.
+        #[arg(long)]
+        npe: Option<PathBuf>,
         /// Print a JSON summary.
         #[arg(long)]
         json: bool,
@@ -66,6 +71,10 @@ pub enum PegCommand {
         /// Output folder (default: POLICIES).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// The neural physics engine the touch policy's latents come from (required when
+        /// its demonstrations were made with `--npe`).
+        #[arg(long)]
+        npe: Option<PathBuf>,
         /// Print a JSON summary.
         #[arg(long)]
         json: bool,
@@ -92,10 +101,24 @@ pub enum PegCommand {
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
+        /// Latents from this trained neural physics engine, and its nodal fields of both pads
+        /// per frame (npe_displacement.npy, npe_force.npy).
+        #[arg(long)]
+        npe: Option<PathBuf>,
         /// Print a JSON summary.
         #[arg(long)]
         json: bool,
     },
+}
+
+/// The tactile encoder: the engine of `npe` when given, else the raw contact features.
+fn encoder(npe: Option<&Path>) -> anyhow::Result<Box<dyn TactileEncoder>> {
+    Ok(match npe {
+        Some(p) => Box::new(
+            NpeEncoder::load(p).with_context(|| format!("loading the engine {}", p.display()))?,
+        ),
+        None => Box::new(ContactFeatures),
+    })
 }
 
 fn mkdir(out: &Path) -> anyhow::Result<()> {
@@ -135,8 +158,10 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             count,
             seed,
             out,
+            npe,
             json,
         } => {
+            let enc = encoder(npe.as_deref())?;
             mkdir(&out)?;
             let settings = DemoSettings {
                 count,
@@ -148,9 +173,8 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             };
             let pb = bar(count, "expert demonstrations");
             let t = std::time::Instant::now();
-            let set = DemoSet::collect(&settings, &ContactFeatures, &mut |k| {
-                pb.set_position(k as u64)
-            })?;
+            let set =
+                DemoSet::collect(&settings, enc.as_ref(), &mut |k| pb.set_position(k as u64))?;
             pb.finish_and_clear();
             let secs = t.elapsed().as_secs_f64();
             set.save(&out)?;
@@ -161,6 +185,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 "expert_success_rate": set.demos() as f64 / tried.max(1) as f64,
                 "rows": set.rows(),
                 "encoder": set.encoder,
+                "npe": npe,
                 "seed": seed,
                 "wall_time_s": secs,
                 "out": out,
@@ -222,10 +247,12 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             trials,
             seed,
             out,
+            npe,
             json,
         } => {
             let out = out.unwrap_or_else(|| policies.clone());
             mkdir(&out)?;
+            let enc = encoder(npe.as_deref())?;
             let scene = SceneConfig::default();
             let rand = Randomisation::default();
             let spec = TrialSpec {
@@ -236,17 +263,30 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             };
             let mut evals = Vec::new();
             for name in ["touch", "notouch"] {
-                let p = BcPolicy::load(&policies.join(format!("policy_{name}.ckpt")))?;
+                let file = policies.join(format!("policy_{name}.ckpt"));
+                let p = BcPolicy::load(&file)?;
+                anyhow::ensure!(
+                    !p.meta.touch || p.meta.encoder == enc.name(),
+                    "{} reads {} latents but the encoder is {}{}",
+                    file.display(),
+                    p.meta.encoder,
+                    enc.name(),
+                    if p.meta.encoder == "npe" {
+                        ": pass --npe with the engine its demonstrations were made with"
+                    } else {
+                        ": leave out --npe"
+                    }
+                );
                 let pb = bar(scene.max_control_steps(), &format!("{name} policy"));
                 let t = std::time::Instant::now();
-                let ev = evaluate_policy(name, &p, spec, &ContactFeatures, &mut |k| {
+                let ev = evaluate_policy(name, &p, spec, enc.as_ref(), &mut |k| {
                     pb.set_position(k as u64)
                 })?;
                 pb.finish_and_clear();
                 evals.push((ev, t.elapsed().as_secs_f64()));
             }
             let t = std::time::Instant::now();
-            let ex = evaluate_expert(&ExpertConfig::default(), spec, &ContactFeatures)?;
+            let ex = evaluate_expert(&ExpertConfig::default(), spec, enc.as_ref())?;
             evals.push((ex, t.elapsed().as_secs_f64()));
             let mut w = csv::Writer::from_path(out.join("eval.csv"))?;
             w.write_record([
@@ -333,7 +373,12 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 equal_axes: false,
             }
             .write(&out, "success_vs_error")?;
-            let report = serde_json::json!({ "seed": seed, "controllers": summary });
+            let report = serde_json::json!({
+                "seed": seed,
+                "encoder": enc.name(),
+                "npe": npe,
+                "controllers": summary,
+            });
             std::fs::write(
                 out.join("eval.json"),
                 serde_json::to_string_pretty(&report)?,
@@ -361,9 +406,21 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             tilt_deg,
             demo,
             out,
+            npe,
             json,
         } => {
             mkdir(&out)?;
+            let engine = npe
+                .as_deref()
+                .map(|p| {
+                    NpeEncoder::load(p)
+                        .with_context(|| format!("loading the engine {}", p.display()))
+                })
+                .transpose()?;
+            let enc: &dyn TactileEncoder = match &engine {
+                Some(e) => e,
+                None => &ContactFeatures,
+            };
             let rows = read_path(&path)?;
             let scene = SceneConfig::default();
             let error = match demo {
@@ -388,12 +445,28 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 },
             };
             let pb = bar(0, "replay");
-            let frames = replay(&scene, &rows, error, &ContactFeatures, &mut |k, n| {
+            let frames = replay(&scene, &rows, error, enc, &mut |k, n| {
                 pb.set_length(n as u64);
                 pb.set_position(k as u64);
             })?;
             pb.finish_and_clear();
-            write_frames(&out, &frames, error, "contact-features")?;
+            write_frames(&out, &frames, error, enc.name())?;
+            let mut npe_force = None;
+            if let Some(e) = &engine {
+                let pb = bar(frames.len(), "NPE fields");
+                let t = std::time::Instant::now();
+                let fields = npe_fields(&frames, e, &mut |k, _| pb.set_position(k as u64))?;
+                pb.finish_and_clear();
+                let secs = t.elapsed().as_secs_f64();
+                write_npe_fields(&out, &fields, e)?;
+                npe_force = Some((
+                    fields
+                        .iter()
+                        .map(|p| p.clone().map(|f| f.total_force_n()[2]))
+                        .collect::<Vec<[f64; 2]>>(),
+                    secs,
+                ));
+            }
             let series = vec![
                 Series {
                     label: "left sensor".into(),
@@ -414,6 +487,22 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                     dots: false,
                 },
             ];
+            let mut series = series;
+            if let Some((f, _)) = &npe_force {
+                // The engine's force on the body in the mesh frame (z up, out of the gel): its
+                // z component is the normal force, comparable with the scene's.
+                for (s, side) in ["left", "right"].iter().enumerate() {
+                    series.push(Series {
+                        label: format!("{side} sensor, NPE nodal forces summed"),
+                        points: frames
+                            .iter()
+                            .zip(f)
+                            .map(|(fr, v)| (fr.time_s, v[s]))
+                            .collect(),
+                        dots: false,
+                    });
+                }
+            }
             Chart {
                 title: "replay: normal force per sensor and tip height",
                 x_label: "time (s)",
@@ -426,6 +515,8 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 "frames": frames.len(),
                 "in_hand_error": error,
                 "final_tip_m": frames.last().map(|f| f.tip_m),
+                "encoder": enc.name(),
+                "npe_fields_s": npe_force.as_ref().map(|(_, s)| s),
                 "out": out,
             });
             if json {

@@ -15,6 +15,7 @@ mod cmd_peg;
 mod cmd_rl;
 mod cmd_surrogate;
 mod cmd_tactile;
+mod cmd_tactile_net;
 mod cmd_track;
 mod plot;
 mod plot_track;

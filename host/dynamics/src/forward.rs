@@ -4,6 +4,8 @@
 use ocm_learn::burn;
 use ocm_learn::burn::module::Module;
 use ocm_learn::burn::tensor::{Device, Tensor, TensorData};
+use ocm_learn::infer::DenseMlp;
+use ocm_learn::infer_sequence::DenseSequenceEncoder;
 use ocm_learn::{Mlp, MlpConfig, SequenceEncoder, SequenceEncoderConfig, tensor2};
 use serde::{Deserialize, Serialize};
 
@@ -80,6 +82,31 @@ impl ForwardModel {
     /// Scaled windows `[batch, window, step_dim]` to scaled velocities `[batch, state_dim]`.
     pub fn forward(&self, windows: Tensor<3>) -> Tensor<2> {
         self.head.forward(self.encoder.forward_last(windows))
+    }
+
+    /// The same model as plain arrays, for fast batched inference.
+    pub fn dense(&self) -> crate::Result<DenseForward> {
+        Ok(DenseForward {
+            encoder: DenseSequenceEncoder::from_encoder(&self.encoder)?,
+            head: DenseMlp::from_mlp(&self.head),
+        })
+    }
+}
+
+/// [`ForwardModel`] as plain `f32` arrays (no tensors, graph or autodiff), for batched
+/// inference (`ocm learn bench`). It computes the same function to f32 round-off.
+#[derive(Debug, Clone)]
+pub struct DenseForward {
+    encoder: DenseSequenceEncoder,
+    head: DenseMlp,
+}
+
+impl DenseForward {
+    /// Scaled windows, row-major `[batch, steps, step_dim]`, to scaled velocities `[batch,
+    /// state_dim]`.
+    pub fn forward(&self, windows: &[f32], batch: usize, steps: usize) -> crate::Result<Vec<f32>> {
+        let h = self.encoder.forward_last(windows, batch, steps)?;
+        Ok(self.head.forward_rows(&h, batch))
     }
 }
 

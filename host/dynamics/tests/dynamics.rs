@@ -247,6 +247,20 @@ fn forward_and_inverse_learn_the_lumped_system_and_survive_checkpoints() {
     for (s, d) in spliced.iter().zip(&direct) {
         assert!((s - d).abs() < 1e-4, "{s} vs {d}");
     }
+    // The plain-array model (the benchmark's) computes the trained model's function.
+    let dense = fwd
+        .model
+        .dense()
+        .unwrap()
+        .forward(&data.windows(&batch), batch.len(), 10)
+        .unwrap();
+    assert_eq!(dense.len(), direct.len());
+    for (a, d) in dense.iter().zip(&direct) {
+        assert!(
+            (a - d).abs() < 1e-4 * d.abs().max(1.0),
+            "dense {a} vs burn {d}"
+        );
+    }
 
     let (inv, icurve) = train_inverse(
         train_set,

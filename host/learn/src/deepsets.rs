@@ -81,6 +81,11 @@ impl DeepSets {
         self.rho.forward(pooled)
     }
 
+    /// The factor on the sum.
+    pub fn scale(&self) -> f64 {
+        self.scale
+    }
+
     fn rho_input(&self) -> usize {
         self.rho.layers.first().map_or(0, |l| l.weight.dims()[0])
     }

@@ -12,6 +12,9 @@ use serde::{Deserialize, Serialize};
 use crate::error::{LearnError, Result};
 use crate::init::seeded_init;
 
+/// Epsilon of the layers' LayerNorm (burn's default, stated so plain evaluations match).
+pub const LAYER_NORM_EPSILON: f64 = 1e-5;
+
 /// A fixed undirected graph for mean aggregation: every edge is used in both directions.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Graph {
@@ -126,7 +129,9 @@ impl GcnConfig {
                     .with_bias(false)
                     .with_initializer(Initializer::Zeros)
                     .init(device),
-                norm: LayerNormConfig::new(self.width).init(device),
+                norm: LayerNormConfig::new(self.width)
+                    .with_epsilon(LAYER_NORM_EPSILON)
+                    .init(device),
             })
             .collect();
         seeded_init(Gcn { layers }, seed)
@@ -141,6 +146,16 @@ pub struct GcnLayer {
 }
 
 impl GcnLayer {
+    /// The linear map W (no bias).
+    pub fn linear(&self) -> &Linear {
+        &self.linear
+    }
+
+    /// The LayerNorm.
+    pub fn norm(&self) -> &LayerNorm {
+        &self.norm
+    }
+
     /// Applies the layer to `[nodes, batch, width]`.
     pub fn forward(&self, h: Tensor<3>, graph: &GraphTensors) -> Tensor<3> {
         let m = self.linear.forward(graph.mean_neighbours(h.clone()));

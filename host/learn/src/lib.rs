@@ -4,7 +4,8 @@
 //! - [`train`]: seeded split and shuffling, Adam, early stopping, progress bar, loss curve.
 //! - [`checkpoint`]: weights with architecture, configuration and scaling, checksummed.
 //! - [`scaling`]: per-feature standardisation stored with the checkpoint.
-//! - [`mlp`], [`sequence`]: the networks (MLP, pre-norm Transformer encoder).
+//! - [`mlp`], [`sequence`], [`unet`]: the networks (MLP, pre-norm Transformer encoder, U-Net).
+//! - [`infer`]: plain `f32` inference of trained MLPs, DeepSets and GCNs (latency-bound calls).
 //! - [`init`]: seeded initialisation independent of burn's global generator.
 
 pub mod checkpoint;
@@ -13,11 +14,14 @@ pub mod deepsets;
 pub mod error;
 pub mod gcn;
 pub mod gradcheck;
+pub mod infer;
+pub mod infer_sequence;
 pub mod init;
 pub mod mlp;
 pub mod scaling;
 pub mod sequence;
 pub mod train;
+pub mod unet;
 
 pub use burn;
 pub use checkpoint::{Checkpoint, CheckpointHeader, CheckpointInfo, save_checkpoint};
@@ -27,6 +31,7 @@ pub use mlp::{Activation, Mlp, MlpConfig};
 pub use scaling::Standardizer;
 pub use sequence::{SequenceEncoder, SequenceEncoderConfig};
 pub use train::{Split, TrainConfig, TrainReport, train, train_split};
+pub use unet::{UNet, UNetConfig, UNetNorm};
 
 use burn::tensor::{Device, Tensor, TensorData};
 

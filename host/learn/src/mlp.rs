@@ -28,7 +28,7 @@ impl Activation {
         }
     }
 
-    fn code(self) -> usize {
+    pub(crate) fn code(self) -> usize {
         match self {
             Self::Relu => 0,
             Self::Gelu => 1,
@@ -36,7 +36,7 @@ impl Activation {
         }
     }
 
-    fn from_code(code: usize) -> Self {
+    pub(crate) fn from_code(code: usize) -> Self {
         match code {
             1 => Self::Gelu,
             2 => Self::Tanh,
@@ -102,6 +102,11 @@ pub struct Mlp {
 }
 
 impl Mlp {
+    /// The nonlinearity between hidden layers.
+    pub fn activation(&self) -> Activation {
+        Activation::from_code(self.activation)
+    }
+
     /// Maps `[..., input]` to `[..., output]`.
     pub fn forward<const D: usize>(&self, x: Tensor<D>) -> Tensor<D> {
         let act = Activation::from_code(self.activation);

@@ -82,6 +82,18 @@ impl SequenceEncoder {
         self.norm.forward(h)
     }
 
+    /// The layers, for plain-array inference (`crate::infer_sequence`).
+    pub(crate) fn parts(
+        &self,
+    ) -> (
+        &Linear,
+        &PositionalEncoding,
+        &TransformerEncoder,
+        &LayerNorm,
+    ) {
+        (&self.embed, &self.positions, &self.blocks, &self.norm)
+    }
+
     /// The embedding of the last step, `[batch, d_model]`: a summary of the whole history.
     pub fn forward_last(&self, x: Tensor<3>) -> Tensor<2> {
         let h = self.forward(x);

@@ -10,6 +10,7 @@ use ocm_learn::{Checkpoint, CheckpointInfo, cpu, save_checkpoint, values};
 use serde::{Deserialize, Serialize};
 
 use crate::data::NodeLocator;
+use crate::kernel::Kernel;
 use crate::model::{ARCHITECTURE, Inputs, NpeConfig, NpeNet};
 use crate::{NpeError, Result};
 
@@ -64,6 +65,7 @@ pub struct Npe {
     device: Device,
     positions: Tensor<3>,
     graph: GraphTensors,
+    kernel: Kernel,
     lo: [f64; 2],
     hi: [f64; 2],
     locator: NodeLocator,
@@ -73,12 +75,14 @@ impl Npe {
     /// Wraps a network (on any device; it is moved to the plain CPU device).
     pub fn new(net: NpeNet, config: NpeConfig, surface: Surface) -> Result<Self> {
         let device = cpu();
-        let graph = Graph::from_edges(surface.rest_m.len(), &surface.edges)?.tensors(&device);
+        let plain_graph = Graph::from_edges(surface.rest_m.len(), &surface.edges)?;
+        let graph = plain_graph.tensors(&device);
         let pos: Vec<f32> = surface
             .rest_m
             .iter()
             .flat_map(|p| config.scales.point(p))
             .collect();
+        let kernel = Kernel::new(&net, &config, &plain_graph, pos.clone());
         let positions =
             Tensor::<3>::from_data(TensorData::new(pos, [surface.rest_m.len(), 1, 3]), &device);
         let mut lo = [f64::INFINITY; 2];
@@ -95,11 +99,17 @@ impl Npe {
             device,
             positions,
             graph,
+            kernel,
             lo,
             hi,
             locator: NodeLocator::new(&surface.rest_m),
             surface,
         })
+    }
+
+    /// The x-y outline of the top face (lowest and highest x, y of its nodes), m.
+    pub fn face_bounds(&self) -> ([f64; 2], [f64; 2]) {
+        (self.lo, self.hi)
     }
 
     /// The network.
@@ -213,10 +223,8 @@ impl Npe {
                 ignored_points: ignored,
             });
         }
-        let (out, _) =
-            self.net
-                .forward(&self.config, &x, &self.positions, &self.graph, &self.device);
-        let mut fields = self.unscale(&values(out));
+        let (out, _) = self.kernel.forward(&x);
+        let mut fields = self.unscale(&out);
         fields.ignored_points = ignored;
         Ok(fields)
     }
@@ -243,7 +251,33 @@ impl Npe {
         if x.counts[0] == 0 {
             return Ok(vec![0.0; self.config.global_width()]);
         }
-        Ok(values(self.net.global(&self.config, &x, &self.device)))
+        Ok(self.kernel.global(&x))
+    }
+
+    /// The network's burn forward pass on one call (what [`Npe::predict`] computes through
+    /// the plain kernel), scaled `[nodes, 6]`, with h_global; for comparisons.
+    pub fn predict_scaled_burn(
+        &self,
+        points_m: &[[f64; 3]],
+        force_n: f64,
+        depth_m: f64,
+    ) -> Result<(Vec<f32>, Vec<f32>)> {
+        let x = self.admit(points_m, force_n, depth_m)?;
+        let (out, hg) =
+            self.net
+                .forward(&self.config, &x, &self.positions, &self.graph, &self.device);
+        Ok((values(out), values(hg)))
+    }
+
+    /// The plain kernel's pass on one call, scaled `[nodes, 6]`, with h_global.
+    pub fn predict_scaled(
+        &self,
+        points_m: &[[f64; 3]],
+        force_n: f64,
+        depth_m: f64,
+    ) -> Result<(Vec<f32>, Vec<f32>)> {
+        let x = self.admit(points_m, force_n, depth_m)?;
+        Ok(self.kernel.forward(&x))
     }
 
     /// Scaled positions and graph tensors, for batched evaluation.

@@ -8,6 +8,7 @@
 //! - [`data`]: samples of an `ocm-tactile` dataset and the split by set-up.
 //! - [`fit`]: training with the shared loop of `ocm-learn` (loss eq 6.17).
 //! - [`engine`]: [`Npe`], the trained engine: `load`, `predict`, `latent`.
+//! - [`kernel`]: the engine's forward pass on plain values (one call, no tensors).
 //! - [`eval`]: Table 6.1 against the FEM. [`bench`]: latency per call.
 
 pub mod bench;
@@ -17,6 +18,7 @@ pub mod error;
 pub mod eval;
 pub mod figure;
 pub mod fit;
+pub mod kernel;
 pub mod model;
 
 pub use engine::{Fields, Npe, Surface};

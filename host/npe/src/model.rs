@@ -77,6 +77,15 @@ pub struct NpeConfig {
     pub scales: Scales,
     /// Weight of the nodal force term in the loss (eq 6.17), on the scaled targets.
     pub lambda: f64,
+    /// Weight of the resultant term: the squared error of the summed nodal force (the force
+    /// on the body), in newtons. Zero in checkpoints written before it existed; left out of
+    /// the stored configuration when zero, so those checkpoints still load.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub lambda_total: f64,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 impl NpeConfig {
@@ -104,7 +113,14 @@ impl NpeConfig {
                 nodal_force_n: 0.01,
             },
             lambda: 1.0,
+            lambda_total: 0.0,
         }
+    }
+
+    /// Spacing of the contact grid the engine was built for, m (from [`NpeConfig::set_scale`]:
+    /// the cell area in units of 10 mm^2).
+    pub fn grid_spacing_m(&self) -> f64 {
+        (self.set_scale * 10.0 * 1e-6).sqrt()
     }
 
     /// Width of h_global.
@@ -166,10 +182,10 @@ pub struct Inputs {
 /// The network.
 #[derive(Module, Debug)]
 pub struct NpeNet {
-    encoder: DeepSets,
-    fusion: Mlp,
-    gcn: Gcn,
-    readout: Mlp,
+    pub(crate) encoder: DeepSets,
+    pub(crate) fusion: Mlp,
+    pub(crate) gcn: Gcn,
+    pub(crate) readout: Mlp,
 }
 
 impl NpeNet {

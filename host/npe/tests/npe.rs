@@ -3,7 +3,7 @@
 
 use ocm_learn::cpu;
 use ocm_npe::data::{Prepared, Sample};
-use ocm_npe::fit::{FitOptions, fit};
+use ocm_npe::fit::{FitOptions, fit, loss};
 use ocm_npe::model::NpeConfig;
 use ocm_npe::{Npe, NpeError, Surface};
 
@@ -207,4 +207,80 @@ fn same_seed_same_engine_and_checkpoint_round_trip() {
     assert_eq!(run(&a.npe), run(&back));
     assert_eq!(back.surface, a.npe.surface);
     std::fs::remove_file(&path).ok();
+}
+
+/// The plain kernel behind `predict` and `latent` against the burn network it was copied from,
+/// for the engine and both ablations.
+#[test]
+fn plain_kernel_computes_what_the_burn_network_computes() {
+    for (geometry, force) in [(true, true), (false, true), (true, false)] {
+        let s = surface();
+        let mut cfg = NpeConfig::new(Prepared::top_center(&s.rest_m), 0.25e-3);
+        cfg.layers = 3;
+        cfg.width = 12;
+        cfg.use_geometry = geometry;
+        cfg.use_force = force;
+        let net = cfg.init(&cpu(), 9).unwrap();
+        let npe = Npe::new(net, cfg, s).unwrap();
+        let pts = cap(3.2e-3, 2.4e-3, 0.4e-3);
+        let (a, ha) = npe.predict_scaled(&pts, 1.5, 0.4e-3).unwrap();
+        let (b, hb) = npe.predict_scaled_burn(&pts, 1.5, 0.4e-3).unwrap();
+        assert_eq!((a.len(), ha.len()), (b.len(), hb.len()));
+        let scale = b.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        assert!(
+            scale > 1e-3,
+            "a degenerate output cannot tell the two apart"
+        );
+        for (x, y) in a.iter().zip(&b).chain(ha.iter().zip(&hb)) {
+            assert!(
+                (x - y).abs() <= 1e-4 * (1.0 + y.abs()),
+                "geometry {geometry} force {force}: {x} vs {y}"
+            );
+        }
+        assert_eq!(npe.latent(&pts, 1.5, 0.4e-3).unwrap(), ha);
+    }
+}
+
+/// The resultant term of the loss is lambda_total times the mean squared error of the summed
+/// nodal force in newtons, computed here from the engine's own predictions.
+#[test]
+fn resultant_term_adds_the_squared_error_of_the_summed_force() {
+    let p = synthetic();
+    let mut cfg = NpeConfig::new(Prepared::top_center(&p.rest_m), p.spacing_m);
+    cfg.layers = 2;
+    cfg.width = 12;
+    let net = cfg.init(&cpu(), 4).unwrap();
+    let surface = Surface {
+        rest_m: p.rest_m.clone(),
+        edges: p.edges.clone(),
+    };
+    let npe = Npe::new(net, cfg.clone(), surface).unwrap();
+    let (pos, graph, device) = npe.parts();
+    let batch = [2usize, 9];
+    let plain = ocm_learn::values(loss(npe.net(), &cfg, &p, &batch, pos, graph, device))[0];
+    let mut with = cfg.clone();
+    with.lambda_total = 0.5;
+    let total = ocm_learn::values(loss(npe.net(), &with, &p, &batch, pos, graph, device))[0];
+    let mut sq = 0.0;
+    for &i in &batch {
+        let s = &p.samples[i];
+        let (out, _) = npe
+            .predict_scaled(&s.points_m, s.force_n[2], s.depth_m)
+            .unwrap();
+        for k in 3..6 {
+            let e: f64 = out
+                .chunks(6)
+                .zip(s.target.chunks(6))
+                .map(|(a, b)| f64::from(a[k] - b[k]))
+                .sum::<f64>()
+                * cfg.scales.nodal_force_n;
+            sq += e * e;
+        }
+    }
+    let want = f64::from(plain) + 0.5 * sq / (3 * batch.len()) as f64;
+    assert!(sq > 1e-6, "the untrained engine should miss the resultant");
+    assert!(
+        (f64::from(total) - want).abs() < 1e-4 * want,
+        "{total} vs {want}"
+    );
 }

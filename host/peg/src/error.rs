@@ -22,6 +22,9 @@ pub enum PegError {
     /// Training, checkpoint or network error.
     #[error(transparent)]
     Learn(#[from] ocm_learn::LearnError),
+    /// The neural physics engine refused an input or a checkpoint.
+    #[error(transparent)]
+    Npe(#[from] ocm_npe::NpeError),
 }
 
 /// Result with [`PegError`].

@@ -7,7 +7,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::encoder::TactileEncoder;
 use crate::error::{PegError, Result};
+use crate::npe_encoder::NpeEncoder;
 use crate::scene::{GripperPose, InHandError, PegScene, SceneConfig};
+use ocm_npe::Fields;
 
 /// Columns of a path CSV, in order (units in the names).
 pub const PATH_COLUMNS: [&str; 5] = ["time_s", "x_m", "y_m", "z_m", "roll_rad"];
@@ -250,4 +252,70 @@ pub fn write_frames(dir: &Path, frames: &[Frame], error: InHandError, encoder: &
     let mp = dir.join("replay.json");
     let text = serde_json::to_string_pretty(&manifest).map_err(|e| PegError::file(&mp, e))?;
     std::fs::write(&mp, text).map_err(|e| PegError::file(&mp, e))
+}
+
+/// The engine's nodal fields of both pads (left, right) for every frame, from the frames'
+/// contact points and forces; `progress(done, frames)` after each frame.
+pub fn npe_fields(
+    frames: &[Frame],
+    npe: &NpeEncoder,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Vec<[Fields; 2]>> {
+    let mut out = Vec::with_capacity(frames.len());
+    for (k, f) in frames.iter().enumerate() {
+        out.push([
+            npe.fields(&f.points_m[0], f.force_n[0])?,
+            npe.fields(&f.points_m[1], f.force_n[1])?,
+        ]);
+        progress(k + 1, frames.len());
+    }
+    Ok(out)
+}
+
+/// Writes the engine's fields into `dir`: `npe_displacement.npy` and `npe_force.npy`
+/// (float64, rows frame-major left then right, columns x, y, z of every top node: m and N in
+/// the gel mesh's frame), `npe_nodes.npy` (the top nodes' rest positions, m) and
+/// `npe_fields.csv` (per frame and sensor: largest displacement, and the force on the peg from
+/// the summed nodal forces, mesh frame: z is the normal force).
+pub fn write_npe_fields(dir: &Path, fields: &[[Fields; 2]], npe: &NpeEncoder) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| PegError::file(dir, e))?;
+    let rest = &npe.npe().surface.rest_m;
+    let cols = 3 * rest.len();
+    let (mut u, mut f) = (Vec::new(), Vec::new());
+    let p = dir.join("npe_fields.csv");
+    let mut w = csv::Writer::from_path(&p).map_err(|e| PegError::file(&p, e))?;
+    w.write_record([
+        "frame",
+        "sensor",
+        "max_displacement_m",
+        "force_on_peg_x_n",
+        "force_on_peg_y_n",
+        "force_on_peg_z_n",
+    ])
+    .map_err(|e| PegError::file(&p, e))?;
+    for (k, pair) in fields.iter().enumerate() {
+        for (s, fl) in pair.iter().enumerate() {
+            u.extend(fl.displacement_m.iter().flatten());
+            f.extend(fl.nodal_force_n.iter().flatten());
+            let umax = fl
+                .displacement_m
+                .iter()
+                .map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt())
+                .fold(0.0, f64::max);
+            let t = fl.total_force_n();
+            let rec = [umax, t[0], t[1], t[2]].map(|v| format!("{v:.6e}"));
+            w.write_record([k.to_string(), s.to_string()].into_iter().chain(rec))
+                .map_err(|e| PegError::file(&p, e))?;
+        }
+    }
+    w.flush().map_err(|e| PegError::file(&p, e))?;
+    let npy = |name: &str, data: &[f64], cols: usize| -> Result<()> {
+        let path = dir.join(name);
+        ocm_fem::npy::write_f64_2d_path(&path, data, data.len() / cols.max(1), cols)
+            .map_err(|e| PegError::file(&path, e))
+    };
+    npy("npe_displacement.npy", &u, cols)?;
+    npy("npe_force.npy", &f, cols)?;
+    let nodes: Vec<f64> = rest.iter().flatten().copied().collect();
+    npy("npe_nodes.npy", &nodes, 3)
 }

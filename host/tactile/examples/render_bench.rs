@@ -31,6 +31,37 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let fields = read_cached_steps(&fields_dir, steps, gel.num_nodes())
         .ok_or("no u_NNN.npy fields of this mesh in FIELDS_DIR")?;
+    // Where a frame's time goes: the resampling onto the image alone, then the whole frame.
+    let pool = ocm_tactile::optics::bench::pool(threads)?;
+    let mut h = vec![0.0f32; ROWS * COLS];
+    let mut per_frame = Vec::new();
+    pool.install(|| -> ocm_tactile::Result<()> {
+        for _ in 0..5 {
+            let t0 = std::time::Instant::now();
+            for i in 0..frames {
+                sampler.heights(&fields[i % fields.len()], &mut h)?;
+            }
+            per_frame.push(t0.elapsed().as_secs_f64() / frames as f64 * 1e6);
+        }
+        Ok(())
+    })?;
+    per_frame.sort_by(f64::total_cmp);
+    println!("resampling alone: median {:.0} us per frame", per_frame[2]);
+    let (mut sloped, mut total) = (0usize, 0usize);
+    for u in &fields {
+        sampler.heights(u, &mut h)?;
+        let s = ocm_tactile::optics::render::slopes(&h, ROWS, COLS, sampler.m_per_px as f32)?;
+        sloped += s
+            .iter()
+            .filter(|(a, b)| calib.bin(*a, *b) != calib.flat_bin())
+            .count();
+        total += s.len();
+    }
+    println!(
+        "pixels outside the flat bin: {:.1} % (over the {} fields)",
+        100.0 * sloped as f64 / total as f64,
+        fields.len()
+    );
     for smooth in [0.0, 5.0] {
         let mut r = Renderer::new(calib.clone(), &bg)?;
         r.smooth_px = smooth;

@@ -75,6 +75,9 @@ pub enum TactileError {
         /// What is wrong.
         msg: String,
     },
+    /// Training, evaluating or loading a network failed.
+    #[error(transparent)]
+    Learn(#[from] ocm_learn::LearnError),
 }
 
 /// Result alias for this crate.

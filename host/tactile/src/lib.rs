@@ -19,6 +19,7 @@ pub mod indent;
 pub mod indenter;
 pub mod mask;
 pub mod metrics;
+pub mod nets;
 pub mod optics;
 pub mod output;
 pub mod real;

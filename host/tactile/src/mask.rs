@@ -136,6 +136,15 @@ impl Mask {
         }
     }
 
+    /// Dilation with a (2r+1) x (2r+1) square: every pixel within r pixels (Chebyshev) of a set
+    /// one.
+    pub fn dilated(&self, r: usize) -> Mask {
+        Mask {
+            grid: self.grid,
+            pixels: filter(&self.pixels, self.grid.rows, self.grid.cols, r, true),
+        }
+    }
+
     /// Fills holes: unset pixels not connected (4-neighbours) to the border become set.
     pub fn filled(&self) -> Mask {
         let (rows, cols) = (self.grid.rows, self.grid.cols);

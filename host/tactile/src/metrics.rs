@@ -82,11 +82,52 @@ pub fn psnr(a: &[f64], b: &[f64], peak: f64) -> Result<f64> {
     })
 }
 
+/// Half-width of the SSIM window (11 x 11).
+pub const SSIM_RADIUS: usize = 5;
+
 /// Structural similarity (Wang et al. 2004) of two single-channel images (rows x cols,
 /// row-major) with an 11 x 11 Gaussian window (sigma 1.5), K1 = 0.01, K2 = 0.03 and dynamic
 /// range `peak`; the mean over all window positions that fit inside the image. For colour images
 /// call it per channel and average.
 pub fn ssim(a: &[f64], b: &[f64], rows: usize, cols: usize, peak: f64) -> Result<f64> {
+    let map = ssim_map(a, b, rows, cols, peak)?;
+    Ok(map.iter().sum::<f64>() / map.len() as f64)
+}
+
+/// SSIM averaged only over the windows whose centre pixel lies in `region` (rows x cols): the
+/// similarity where something happens (a contact), not diluted by an unchanged background.
+/// An error when no window centre lies in the region.
+pub fn ssim_in(
+    a: &[f64],
+    b: &[f64],
+    rows: usize,
+    cols: usize,
+    peak: f64,
+    region: &[bool],
+) -> Result<f64> {
+    same_len("SSIM region", region.len(), rows * cols)?;
+    let map = ssim_map(a, b, rows, cols, peak)?;
+    let oc = cols - 2 * SSIM_RADIUS;
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (i, v) in map.iter().enumerate() {
+        let (r, c) = (i / oc + SSIM_RADIUS, i % oc + SSIM_RADIUS);
+        if region[r * cols + c] {
+            sum += v;
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return Err(TactileError::Input(
+            "SSIM region holds no window centre (empty, or only within 5 px of the border)".into(),
+        ));
+    }
+    Ok(sum / n as f64)
+}
+
+/// The SSIM of every 11 x 11 window that fits inside the image, row-major over window
+/// positions ((rows - 10) x (cols - 10); entry (r, c) is the window centred on pixel
+/// (r + 5, c + 5)).
+pub fn ssim_map(a: &[f64], b: &[f64], rows: usize, cols: usize, peak: f64) -> Result<Vec<f64>> {
     same_len("SSIM", a.len(), b.len())?;
     if a.len() != rows * cols {
         return Err(TactileError::Input(format!(
@@ -94,10 +135,15 @@ pub fn ssim(a: &[f64], b: &[f64], rows: usize, cols: usize, peak: f64) -> Result
             a.len()
         )));
     }
-    const W: usize = 11;
+    const W: usize = 2 * SSIM_RADIUS + 1;
     if rows < W || cols < W {
         return Err(TactileError::Input(format!(
             "SSIM needs at least {W} x {W} pixels, got {rows} x {cols}"
+        )));
+    }
+    if !(peak > 0.0 && peak.is_finite()) {
+        return Err(TactileError::Input(format!(
+            "SSIM dynamic range {peak} is not positive"
         )));
     }
     let g: Vec<f64> = {
@@ -132,16 +178,15 @@ pub fn ssim(a: &[f64], b: &[f64], rows: usize, cols: usize, peak: f64) -> Result
     let sab = blur(&|i| a[i] * b[i]);
     let c1 = (0.01 * peak).powi(2);
     let c2 = (0.03 * peak).powi(2);
-    let mut total = 0.0;
-    for i in 0..ma.len() {
-        let (mx, my) = (ma[i], mb[i]);
-        let vx = saa[i] - mx * mx;
-        let vy = sbb[i] - my * my;
-        let cxy = sab[i] - mx * my;
-        total +=
-            ((2.0 * mx * my + c1) * (2.0 * cxy + c2)) / ((mx * mx + my * my + c1) * (vx + vy + c2));
-    }
-    Ok(total / ma.len() as f64)
+    Ok((0..ma.len())
+        .map(|i| {
+            let (mx, my) = (ma[i], mb[i]);
+            let vx = saa[i] - mx * mx;
+            let vy = sbb[i] - my * my;
+            let cxy = sab[i] - mx * my;
+            ((2.0 * mx * my + c1) * (2.0 * cxy + c2)) / ((mx * mx + my * my + c1) * (vx + vy + c2))
+        })
+        .collect())
 }
 
 #[cfg(test)]
@@ -225,5 +270,97 @@ mod tests {
         let expect = (2.0 * 100.0 * 50.0 + c1) / (100.0f64 * 100.0 + 50.0 * 50.0 + c1);
         assert!((ssim(&k1, &k2, rows, cols, 255.0).unwrap() - expect).abs() < 1e-9);
         assert!(ssim(&a, &b, rows, cols - 1, 255.0).is_err());
+    }
+
+    /// The normalised 1-d Gaussian (sigma 1.5) of the 11 x 11 window, built here independently
+    /// of `ssim_map`; the window weight at (i, j) is g_i g_j.
+    fn gauss() -> Vec<f64> {
+        let g: Vec<f64> = (0..11)
+            .map(|i| (-((i as f64 - 5.0) * (i as f64 - 5.0)) / 4.5).exp())
+            .collect();
+        let s: f64 = g.iter().sum();
+        g.iter().map(|v| v / s).collect()
+    }
+
+    /// A checkerboard m + d (-1)^(r+c) against m' + alpha d (-1)^(r+c) has, in every window,
+    /// mean m + d e with e = +-S^2 (S = sum_i g_i (-1)^i, sign by the parity of r + c), both
+    /// variances and the covariance proportional to d^2 (1 - S^4): SSIM takes one closed-form
+    /// value per parity, and the mean over windows weighs the two by their counts.
+    #[test]
+    fn ssim_of_checkerboards_matches_the_closed_form() {
+        let (rows, cols, peak) = (23usize, 30usize, 255.0);
+        let (m, d, m2, alpha) = (120.0, 40.0, 131.0, 0.6);
+        let x = |r: usize, c: usize| if (r + c).is_multiple_of(2) { 1.0 } else { -1.0 };
+        let a: Vec<f64> = (0..rows * cols)
+            .map(|i| m + d * x(i / cols, i % cols))
+            .collect();
+        let b: Vec<f64> = (0..rows * cols)
+            .map(|i| m2 + alpha * d * x(i / cols, i % cols))
+            .collect();
+        let g = gauss();
+        let s: f64 = (0..11).map(|i| g[i] * x(i, 0)).sum::<f64>();
+        let s2 = s * s;
+        let (c1, c2) = ((0.01 * peak) * (0.01 * peak), (0.03 * peak) * (0.03 * peak));
+        let var = d * d * (1.0 - s2 * s2);
+        let value = |e: f64| {
+            let (mx, my) = (m + d * e, m2 + alpha * d * e);
+            ((2.0 * mx * my + c1) * (2.0 * alpha * var + c2))
+                / ((mx * mx + my * my + c1) * ((1.0 + alpha * alpha) * var + c2))
+        };
+        // Window (r, c) starts at pixel (r, c): its first weight sits on parity r + c.
+        let (or, oc) = (rows - 10, cols - 10);
+        let even = (0..or * oc)
+            .filter(|i| (i / oc + i % oc).is_multiple_of(2))
+            .count();
+        let expect =
+            (even as f64 * value(s2) + (or * oc - even) as f64 * value(-s2)) / (or * oc) as f64;
+        let got = ssim(&a, &b, rows, cols, peak).unwrap();
+        assert!((got - expect).abs() < 1e-12, "{got} vs {expect}");
+        assert!(value(s2) != value(-s2));
+        // Only windows centred on an even-parity pixel (window start parity is the same).
+        let region: Vec<bool> = (0..rows * cols)
+            .map(|i| (i / cols + i % cols).is_multiple_of(2))
+            .collect();
+        let got = ssim_in(&a, &b, rows, cols, peak, &region).unwrap();
+        assert!((got - value(s2)).abs() < 1e-12, "{got} vs {}", value(s2));
+        assert!(ssim_in(&a, &b, rows, cols, peak, &vec![false; rows * cols]).is_err());
+        assert!(ssim_in(&a, &b, rows, cols, peak, &region[1..]).is_err());
+        assert!(ssim(&a, &b, rows, cols, 0.0).is_err());
+    }
+
+    /// The separable filtering against a direct 11 x 11 sum per window on a pseudo-random pair.
+    #[test]
+    fn ssim_map_matches_direct_window_sums() {
+        let (rows, cols, peak) = (19usize, 26usize, 255.0);
+        let mut state = 12345u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) as f64 / (1u64 << 31) as f64 * 255.0
+        };
+        let a: Vec<f64> = (0..rows * cols).map(|_| next()).collect();
+        let b: Vec<f64> = a.iter().map(|v| 0.5 * v + 0.3 * next() + 20.0).collect();
+        let g = gauss();
+        let map = ssim_map(&a, &b, rows, cols, peak).unwrap();
+        let oc = cols - 10;
+        for (i, got) in map.iter().enumerate() {
+            let (r, c) = (i / oc, i % oc);
+            let (mut mx, mut my, mut xx, mut yy, mut xy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for (di, gi) in g.iter().enumerate() {
+                for (dj, gj) in g.iter().enumerate() {
+                    let (k, wt) = ((r + di) * cols + c + dj, gi * gj);
+                    mx += wt * a[k];
+                    my += wt * b[k];
+                    xx += wt * a[k] * a[k];
+                    yy += wt * b[k] * b[k];
+                    xy += wt * a[k] * b[k];
+                }
+            }
+            let (c1, c2) = (6.5025, 58.5225);
+            let want = ((2.0 * mx * my + c1) * (2.0 * (xy - mx * my) + c2))
+                / ((mx * mx + my * my + c1) * (xx - mx * mx + yy - my * my + c2));
+            assert!((got - want).abs() < 1e-9, "window {r},{c}: {got} vs {want}");
+        }
     }
 }

@@ -477,28 +477,86 @@ pub struct RenderScore {
     pub l1: f64,
     /// PSNR, dB (peak 255).
     pub psnr_db: f64,
-    /// SSIM, mean of the R, G, B channels.
+    /// SSIM over the whole frame, mean of the R, G, B channels (an unchanged background
+    /// dominates it: see `contact_ssim`).
     pub ssim: f64,
     /// IoU of the masks measured on the rendered and on the real frame.
     pub mask_iou: f64,
+    /// SSIM (channel mean, 0-255, dynamic range 255) over the windows that overlap the real
+    /// frame's measured contact (window centres in the mask dilated by 5 px); None when the real
+    /// frame shows no contact.
+    pub contact_ssim: Option<f64>,
+    /// Mean absolute difference over the same contact region, grey levels.
+    pub contact_l1: Option<f64>,
 }
 
-/// L1, PSNR, SSIM (channel mean) and measured-mask IoU of a rendered frame against a real one.
+/// The pixels where a rendered frame is judged against a real one: the real frame's measured
+/// contact mask dilated by the SSIM window's half-width, so that every window overlapping the
+/// contact has its centre inside. None when the mask is empty.
+pub fn contact_region(real_mask: &Mask) -> Option<Vec<bool>> {
+    (real_mask.count() > 0).then(|| real_mask.dilated(metrics::SSIM_RADIUS).pixels)
+}
+
+/// Scores of a rendered frame against a real one (frame and FEM step left 0 for the caller):
+/// L1, PSNR, SSIM (channel mean) and measured-mask IoU over the whole frame, and SSIM and L1
+/// over the real contact region `region` (see [`contact_region`]).
 pub fn score_frame(
     rendered: &RgbImage,
     real: &RgbImage,
     bg: &RgbImage,
     mask_opts: &MaskOptions,
-) -> Result<(f64, f64, f64, f64)> {
+    region: Option<&[bool]>,
+) -> Result<RenderScore> {
     let (a, b) = (rendered.to_f64(), real.to_f64());
     let l1 = metrics::l1(&a, &b)?;
-    let psnr = metrics::psnr(&a, &b, 255.0)?;
+    let psnr_db = metrics::psnr(&a, &b, 255.0)?;
     let ssim = score_ssim(rendered, real)?;
-    let iou = metrics::iou(
+    let mask_iou = metrics::iou(
         &measured_mask(rendered, bg, mask_opts)?,
         &measured_mask(real, bg, mask_opts)?,
     )?;
-    Ok((l1, psnr, ssim, iou))
+    let (contact_ssim, contact_l1) = match region {
+        Some(reg) => {
+            let (mut sum, mut n) = (0.0, 0usize);
+            for (i, _) in reg.iter().enumerate().filter(|(_, in_)| **in_) {
+                for ch in 0..3 {
+                    sum += (a[i * 3 + ch] - b[i * 3 + ch]).abs();
+                }
+                n += 3;
+            }
+            (
+                Some(score_ssim_in(rendered, real, reg)?),
+                Some(sum / n.max(1) as f64),
+            )
+        }
+        None => (None, None),
+    };
+    Ok(RenderScore {
+        frame: 0,
+        fem_step: 0,
+        l1,
+        psnr_db,
+        ssim,
+        mask_iou,
+        contact_ssim,
+        contact_l1,
+    })
+}
+
+/// SSIM of two RGB images over the windows centred in `region`, the mean over channels.
+pub fn score_ssim_in(a: &RgbImage, b: &RgbImage, region: &[bool]) -> Result<f64> {
+    let mut ssim = 0.0;
+    for ch in 0..3 {
+        ssim += metrics::ssim_in(
+            &a.channel(ch),
+            &b.channel(ch),
+            b.rows,
+            b.cols,
+            255.0,
+            region,
+        )? / 3.0;
+    }
+    Ok(ssim)
 }
 
 /// Height smoothings tried by [`compare`], Gaussian sigma in pixels.
@@ -635,7 +693,8 @@ pub struct Comparison {
     pub gain: f64,
     /// Height smoothing (Gaussian sigma, pixels) chosen on the fitting frames.
     pub smooth_px: f32,
-    /// Mean SSIM on the fitting frames at that smoothing and gain.
+    /// Mean contact-region SSIM (see [`RenderScore::contact_ssim`]) on the fitting frames with
+    /// contact, at that smoothing and gain.
     pub fit_ssim: f64,
     /// Rendered-against-real scores with the fitted gain.
     pub render: Vec<RenderScore>,
@@ -708,7 +767,9 @@ pub fn compare(
     progress("rendering");
     let sampler = SurfaceSampler::new(gel, bg.rows, bg.cols, &fit.map);
     // Smoothing and gain of the optics, fitted on the fitting frames: for each smoothing the
-    // least-squares gain, then the smoothing with the best mean SSIM.
+    // least-squares gain, then the smoothing with the best mean SSIM over the contact regions
+    // (over the whole frame the unchanged background decides, and rendering faintly wins).
+    let regions: Vec<Option<Vec<bool>>> = real.iter().map(contact_region).collect();
     let mut best: Option<(f64, f32, f64)> = None;
     for smooth in SMOOTHING_PX {
         renderer.smooth_px = smooth;
@@ -723,11 +784,14 @@ pub fn compare(
         let gain = fit_gain(&pairs, bg);
         drop(pairs);
         renderer.gain = gain as f32;
-        let mut ssim = 0.0;
+        let (mut ssim, mut n) = (0.0, 0usize);
         for &k in &fit_frames {
+            let Some(reg) = &regions[k] else { continue };
             let img = render_paired(renderer, &sampler, fields, fit.offset_steps, k)?;
-            ssim += score_ssim(&img, &frames[k])? / fit_frames.len() as f64;
+            ssim += score_ssim_in(&img, &frames[k], reg)?;
+            n += 1;
         }
+        let ssim = ssim / n.max(1) as f64;
         if best.is_none_or(|b| ssim > b.0) {
             best = Some((ssim, smooth, gain));
         }
@@ -741,14 +805,10 @@ pub fn compare(
         if k.saturating_sub(fit.offset_steps) > fields.len() {
             continue;
         }
-        let (l1, psnr_db, ssim, mask_iou) = score_frame(bg, &frames[k], bg, &opts.mask)?;
+        let region = regions[k].as_deref();
         background_only.push(RenderScore {
             frame: k,
-            fem_step: 0,
-            l1,
-            psnr_db,
-            ssim,
-            mask_iou,
+            ..score_frame(bg, &frames[k], bg, &opts.mask, region)?
         });
         for (g, sm, sink) in [
             (gain, smooth_px, &mut render),
@@ -757,14 +817,10 @@ pub fn compare(
             renderer.gain = g as f32;
             renderer.smooth_px = sm;
             let img = render_paired(renderer, &sampler, fields, fit.offset_steps, k)?;
-            let (l1, psnr_db, ssim, mask_iou) = score_frame(&img, &frames[k], bg, &opts.mask)?;
             sink.push(RenderScore {
                 frame: k,
                 fem_step: k.saturating_sub(fit.offset_steps).min(fields.len()),
-                l1,
-                psnr_db,
-                ssim,
-                mask_iou,
+                ..score_frame(&img, &frames[k], bg, &opts.mask, region)?
             });
         }
     }

@@ -1,7 +1,7 @@
 //! Throughput of the renderer from FEM nodal displacements to RGB frames.
 
 use super::camera::SurfaceSampler;
-use super::render::Renderer;
+use super::render::{RenderScratch, Renderer};
 use crate::{Result, TactileError};
 use serde::{Deserialize, Serialize};
 
@@ -40,13 +40,14 @@ pub fn bench_render(
     let n = sampler.rows * sampler.cols;
     let mut h = vec![0.0f32; n];
     let mut out = vec![0u8; n * 3];
+    let mut scratch = RenderScratch::default();
     let mut fps = Vec::with_capacity(repeats);
     pool.install(|| -> Result<()> {
         for _ in 0..repeats {
             let t0 = std::time::Instant::now();
             for i in 0..frames {
                 sampler.heights(&fields[i % fields.len()], &mut h)?;
-                renderer.render_into(&h, sampler.m_per_px as f32, &mut out)?;
+                renderer.render_with(&h, sampler.m_per_px as f32, &mut scratch, &mut out)?;
             }
             fps.push(frames as f64 / t0.elapsed().as_secs_f64());
         }

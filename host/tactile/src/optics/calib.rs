@@ -25,6 +25,9 @@ pub struct PolyCalib {
     pub bins: usize,
     /// Per bin (magnitude-major), per channel R, G, B, the six coefficients: 18 values per bin.
     pub coeffs: Vec<f32>,
+    /// Squared slope at which each magnitude bin 1..bins-1 starts, tan^2(k (pi/2) / (bins - 1)):
+    /// binning compares squared slopes with these instead of taking an arctangent per pixel.
+    mag_edges2: Vec<f32>,
 }
 
 fn calib_err(path: &str, msg: impl Into<String>) -> TactileError {
@@ -75,7 +78,21 @@ impl PolyCalib {
                 }
             }
         }
-        Ok(PolyCalib { bins, coeffs })
+        let step = std::f64::consts::FRAC_PI_2 / (bins - 1) as f64;
+        let mag_edges2 = (1..bins)
+            .map(|k| {
+                if k == bins - 1 {
+                    f32::INFINITY
+                } else {
+                    (k as f64 * step).tan().powi(2) as f32
+                }
+            })
+            .collect();
+        Ok(PolyCalib {
+            bins,
+            coeffs,
+            mag_edges2,
+        })
     }
 
     /// Reads a Taxim-style `polycalib.npz` (arrays `bins`, `grad_r`, `grad_g`, `grad_b`).
@@ -137,22 +154,35 @@ impl PolyCalib {
     /// neighbouring bins, not measured per direction.
     #[inline]
     pub fn bin(&self, slope_row: f32, slope_col: f32) -> usize {
+        let t2 = slope_row * slope_row + slope_col * slope_col;
+        if t2 < self.flat_slope2() {
+            return self.flat_bin();
+        }
+        self.bin_sloped(slope_row, slope_col, t2)
+    }
+
+    /// Squared slope below which a pixel is in the flat bin.
+    #[inline]
+    pub fn flat_slope2(&self) -> f32 {
+        self.mag_edges2[0]
+    }
+
+    /// [`PolyCalib::bin`] of a slope known to lie outside the flat bin, given its squared
+    /// magnitude `t2`. The magnitude bin is the number of bin edges at or below the slope (the
+    /// floor of atan|s| / step, without the arctangent).
+    #[inline]
+    pub fn bin_sloped(&self, slope_row: f32, slope_col: f32, t2: f32) -> usize {
+        let i = self.mag_edges2.partition_point(|&e| e <= t2);
         let binm = (self.bins - 1) as f32;
-        let t = (slope_row * slope_row + slope_col * slope_col).sqrt();
-        let mag = t.atan() * (binm / std::f32::consts::FRAC_PI_2);
-        let i = (mag as usize).min(self.bins - 1);
-        let j = if i == 0 {
-            (self.bins - 1) / 2
-        } else {
-            let d = (slope_row.atan2(slope_col) + std::f32::consts::PI)
-                * (binm / (2.0 * std::f32::consts::PI));
-            (d.max(0.0) as usize).min(self.bins - 1)
-        };
+        let d = (slope_row.atan2(slope_col) + std::f32::consts::PI)
+            * (binm / (2.0 * std::f32::consts::PI));
+        let j = (d.max(0.0) as usize).min(self.bins - 1);
         i * self.bins + j
     }
 
     /// The flat-surface bin (zero slope: magnitude bin 0, middle direction bin), as the flat
     /// index `bin()` returns.
+    #[inline]
     pub fn flat_bin(&self) -> usize {
         (self.bins - 1) / 2
     }
@@ -206,5 +236,40 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("x.npz") && e.contains("grad_g[0, 1, 1]"), "{e}");
+    }
+
+    /// The magnitude bin from squared-slope edges equals floor(atan|s| / step) computed in f64
+    /// for slopes spread over the whole range (skipping those within 1e-5 rad of an edge, where
+    /// rounding may decide either way), and the direction bin is unchanged.
+    #[test]
+    fn edge_binning_equals_the_arctangent() {
+        let bins = 125;
+        let t = vec![0.0; bins * bins * 6];
+        let c = PolyCalib::from_tables(bins, [&t, &t, &t], "t").unwrap();
+        let step = std::f64::consts::FRAC_PI_2 / (bins - 1) as f64;
+        let mut checked = 0;
+        for k in 0..20_000 {
+            let mag = (k as f64 * 0.000_61).powi(2) * 3.0;
+            let dir = k as f64 * 2.399_963;
+            let (sr, sc) = ((mag * dir.sin()) as f32, (mag * dir.cos()) as f32);
+            let a = f64::from(sr).hypot(f64::from(sc)).atan() / step;
+            if (a - a.round()).abs() < 1e-5 / step {
+                continue;
+            }
+            let want_i = (a as usize).min(bins - 1);
+            let b = c.bin(sr, sc);
+            assert_eq!(b / bins, want_i, "slope ({sr}, {sc})");
+            if want_i > 0 {
+                let d = (f64::from(sr).atan2(f64::from(sc)) + std::f64::consts::PI)
+                    / (2.0 * std::f64::consts::PI / (bins - 1) as f64);
+                if (d - d.round()).abs() > 1e-4 {
+                    assert_eq!(b % bins, (d as usize).min(bins - 1), "slope ({sr}, {sc})");
+                }
+            } else {
+                assert_eq!(b, c.flat_bin());
+            }
+            checked += 1;
+        }
+        assert!(checked > 19_000, "{checked}");
     }
 }

@@ -6,7 +6,9 @@ pub mod bench;
 pub mod calib;
 pub mod camera;
 pub mod render;
+pub mod resample;
 
 pub use calib::PolyCalib;
 pub use camera::{CameraMap, SurfaceSampler};
-pub use render::{Renderer, RgbImage};
+pub use render::{RenderScratch, Renderer, RgbImage};
+pub use resample::GridToMesh;

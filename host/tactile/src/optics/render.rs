@@ -119,10 +119,11 @@ impl RgbImage {
 /// size `m_per_px`: central differences inside, one-sided at the border.
 #[inline]
 fn slope_at(h: &[f32], rows: usize, cols: usize, r: usize, c: usize, m_per_px: f32) -> (f32, f32) {
+    let inv = 1.0 / m_per_px;
     let (c0, c1) = (c.saturating_sub(1), (c + 1).min(cols - 1));
     let (r0, r1) = (r.saturating_sub(1), (r + 1).min(rows - 1));
-    let sc = (h[r * cols + c1] - h[r * cols + c0]) / ((c1 - c0) as f32 * m_per_px);
-    let sr = (h[r1 * cols + c] - h[r0 * cols + c]) / ((r1 - r0) as f32 * m_per_px);
+    let sc = (h[r * cols + c1] - h[r * cols + c0]) * (inv / (c1 - c0) as f32);
+    let sr = (h[r1 * cols + c] - h[r0 * cols + c]) * (inv / (r1 - r0) as f32);
     (sr, sc)
 }
 
@@ -181,42 +182,87 @@ pub fn box_radius(sigma: f32) -> usize {
 /// repeated. The standard deviation is sqrt((2r+1)^2 - 1) / 2 for r = [`box_radius`], within
 /// one pixel of `sigma`; `sigma` <= 0 leaves the field as it is.
 pub fn gaussian_blur(h: &[f32], rows: usize, cols: usize, sigma: f32) -> Vec<f32> {
+    let mut out = vec![0.0f32; h.len()];
+    let mut tmp = vec![0.0f32; h.len()];
+    gaussian_blur_into(h, rows, cols, sigma, &mut tmp, &mut out);
+    out
+}
+
+/// [`gaussian_blur`] into `out` with `tmp` as scratch (both rows x cols), allocating nothing.
+pub fn gaussian_blur_into(
+    h: &[f32],
+    rows: usize,
+    cols: usize,
+    sigma: f32,
+    tmp: &mut [f32],
+    out: &mut [f32],
+) {
     if !(sigma > 0.0) {
-        return h.to_vec();
+        out.copy_from_slice(h);
+        return;
     }
     let r = box_radius(sigma);
-    let along_rows = |src: &[f32], cols: usize| -> Vec<f32> {
-        let mut out = src.to_vec();
-        out.par_chunks_mut(cols).for_each(|line| {
-            let mut ext = vec![0.0f32; cols + 2 * r];
-            let mut prefix = vec![0.0f32; cols + 2 * r + 1];
-            for _ in 0..3 {
-                for (k, e) in ext.iter_mut().enumerate() {
-                    *e = line[(k as isize - r as isize).clamp(0, cols as isize - 1) as usize];
+    box_rows(h, out, cols, r);
+    box_rows(out, tmp, cols, r);
+    box_rows(tmp, out, cols, r);
+    box_cols(out, tmp, rows, cols, r);
+    box_cols(tmp, out, rows, cols, r);
+    box_cols(out, tmp, rows, cols, r);
+    out.copy_from_slice(tmp);
+}
+
+/// One box pass of radius `r` along every row of `src` into `dst` (running sum, border
+/// repeated).
+fn box_rows(src: &[f32], dst: &mut [f32], cols: usize, r: usize) {
+    let w = 1.0 / (2 * r + 1) as f32;
+    let last = cols as isize - 1;
+    dst.par_chunks_mut(cols)
+        .zip(src.par_chunks(cols))
+        .with_min_len(16)
+        .for_each(|(d, s)| {
+            let at = |k: isize| s[k.clamp(0, last) as usize];
+            let mut acc: f32 = (-(r as isize)..=r as isize).map(at).sum();
+            for (c, v) in d.iter_mut().enumerate() {
+                *v = acc * w;
+                let c = c as isize;
+                acc += at(c + r as isize + 1) - at(c - r as isize);
+            }
+        });
+}
+
+/// One box pass of radius `r` along every column of `src` into `dst`: whole rows at a time,
+/// the running sum kept per column, bands of rows in parallel.
+fn box_cols(src: &[f32], dst: &mut [f32], rows: usize, cols: usize, r: usize) {
+    const BAND: usize = 30;
+    let w = 1.0 / (2 * r + 1) as f32;
+    let last = rows as isize - 1;
+    let row = |k: isize| &src[k.clamp(0, last) as usize * cols..][..cols];
+    dst.par_chunks_mut(BAND * cols)
+        .enumerate()
+        .for_each(|(band, d)| {
+            let r0 = (band * BAND) as isize;
+            let mut acc = vec![0.0f32; cols];
+            for k in r0 - r as isize..=r0 + r as isize {
+                for (a, v) in acc.iter_mut().zip(row(k)) {
+                    *a += v;
                 }
-                for k in 0..ext.len() {
-                    prefix[k + 1] = prefix[k] + ext[k];
-                }
-                let w = 1.0 / (2 * r + 1) as f32;
-                for (k, v) in line.iter_mut().enumerate() {
-                    *v = (prefix[k + 2 * r + 1] - prefix[k]) * w;
+            }
+            for (i, line) in d.chunks_mut(cols).enumerate() {
+                let rr = r0 + i as isize;
+                let (add, sub) = (row(rr + r as isize + 1), row(rr - r as isize));
+                for (((o, a), p), m) in line.iter_mut().zip(acc.iter_mut()).zip(add).zip(sub) {
+                    *o = *a * w;
+                    *a += p - m;
                 }
             }
         });
-        out
-    };
-    let transpose = |src: &[f32], rows: usize, cols: usize| -> Vec<f32> {
-        let mut t = vec![0.0f32; src.len()];
-        for rr in 0..rows {
-            for cc in 0..cols {
-                t[cc * rows + rr] = src[rr * cols + cc];
-            }
-        }
-        t
-    };
-    let a = along_rows(h, cols);
-    let b = along_rows(&transpose(&a, rows, cols), rows);
-    transpose(&b, cols, rows)
+}
+
+/// Scratch buffers of a renderer (the smoothed heights), reused from frame to frame.
+#[derive(Debug, Clone, Default)]
+pub struct RenderScratch {
+    smooth: Vec<f32>,
+    tmp: Vec<f32>,
 }
 
 impl Renderer {
@@ -266,6 +312,18 @@ impl Renderer {
     /// Renders heights towards the camera `h` (m, rows x cols) with pixel size `m_per_px` (m)
     /// into `out` (rows x cols x 3). A zero-slope pixel keeps its background value exactly.
     pub fn render_into(&self, h: &[f32], m_per_px: f32, out: &mut [u8]) -> Result<()> {
+        self.render_with(h, m_per_px, &mut RenderScratch::default(), out)
+    }
+
+    /// [`Renderer::render_into`] with scratch buffers kept between frames: no allocation per
+    /// frame once `scratch` has grown to the image size.
+    pub fn render_with(
+        &self,
+        h: &[f32],
+        m_per_px: f32,
+        scratch: &mut RenderScratch,
+        out: &mut [u8],
+    ) -> Result<()> {
         let (rows, cols) = (self.rows, self.cols);
         check_field(h.len(), rows, cols)?;
         if out.len() != rows * cols * 3 {
@@ -287,35 +345,61 @@ impl Renderer {
                 h[i]
             )));
         }
-        let flat_bin = self.calib.flat_bin();
-        let smoothed;
         let h = if self.smooth_px > 0.0 {
-            smoothed = gaussian_blur(h, rows, cols, self.smooth_px);
-            &smoothed[..]
+            scratch.smooth.resize(h.len(), 0.0);
+            scratch.tmp.resize(h.len(), 0.0);
+            gaussian_blur_into(
+                h,
+                rows,
+                cols,
+                self.smooth_px,
+                &mut scratch.tmp,
+                &mut scratch.smooth,
+            );
+            &scratch.smooth[..]
         } else {
             h
         };
+        let inv = 1.0 / m_per_px;
+        let flat2 = self.calib.flat_slope2();
         out.par_chunks_mut(cols * 3)
             .enumerate()
+            .with_min_len(16)
             .for_each(|(r, line)| {
+                let (r0, r1) = (r.saturating_sub(1), (r + 1).min(rows - 1));
+                let inv_r = inv / (r1 - r0) as f32;
+                let (up, mid, dn) = (
+                    &h[r0 * cols..][..cols],
+                    &h[r * cols..][..cols],
+                    &h[r1 * cols..][..cols],
+                );
+                let bg = &self.background[r * cols * 3..][..cols * 3];
+                let basis = &self.basis[r * cols..][..cols];
+                let flat = &self.flat[r * cols..][..cols];
+                let half = 0.5 * inv;
                 for c in 0..cols {
-                    let k = r * cols + c;
-                    let (sr, sc) = slope_at(h, rows, cols, r, c, m_per_px);
+                    let sr = (dn[c] - up[c]) * inv_r;
+                    let sc = if c > 0 && c + 1 < cols {
+                        (mid[c + 1] - mid[c - 1]) * half
+                    } else {
+                        let (c0, c1) = (c.saturating_sub(1), (c + 1).min(cols - 1));
+                        (mid[c1] - mid[c0]) * (inv / (c1 - c0) as f32)
+                    };
                     let px = &mut line[c * 3..c * 3 + 3];
-                    if sr == 0.0 && sc == 0.0 {
-                        px.copy_from_slice(&self.background[k * 3..k * 3 + 3]);
+                    let bgp = &bg[c * 3..c * 3 + 3];
+                    let t2 = sr * sr + sc * sc;
+                    if t2 < flat2 {
+                        px.copy_from_slice(bgp);
                         continue;
                     }
-                    let bin = self.calib.bin(sr, sc);
-                    if bin == flat_bin {
-                        px.copy_from_slice(&self.background[k * 3..k * 3 + 3]);
-                        continue;
-                    }
-                    let b = &self.basis[k];
+                    let bin = self.calib.bin_sloped(sr, sc, t2);
+                    let b = &basis[c];
                     for ch in 0..3 {
-                        let v = f32::from(self.background[k * 3 + ch])
-                            + self.gain * (self.calib.eval(bin, ch, b) - self.flat[k][ch]);
-                        px[ch] = v.round().clamp(0.0, 255.0) as u8;
+                        let v = f32::from(bgp[ch])
+                            + self.gain * (self.calib.eval(bin, ch, b) - flat[c][ch]);
+                        // Round half up on the clamped value: round() for the 0..255 range,
+                        // without the libm call.
+                        px[ch] = (v.clamp(0.0, 255.0) + 0.5) as u8;
                     }
                 }
             });
@@ -331,5 +415,52 @@ impl Renderer {
             cols: self.cols,
             data,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The running-sum blur equals three plain box means along rows then three along columns,
+    /// each sum taken directly with the border repeated.
+    #[test]
+    fn blur_matches_direct_box_sums() {
+        let (rows, cols) = (37, 53);
+        let h: Vec<f32> = (0..rows * cols)
+            .map(|i| ((i * 7919) % 101) as f32 / 101.0)
+            .collect();
+        for sigma in [1.0f32, 2.5, 8.0] {
+            let r = box_radius(sigma) as isize;
+            let pass = |src: &[f32], along_rows: bool| -> Vec<f32> {
+                let mut out = vec![0.0f32; src.len()];
+                for y in 0..rows as isize {
+                    for x in 0..cols as isize {
+                        let mut s = 0.0f64;
+                        for k in -r..=r {
+                            let (yy, xx) = if along_rows {
+                                (y, (x + k).clamp(0, cols as isize - 1))
+                            } else {
+                                ((y + k).clamp(0, rows as isize - 1), x)
+                            };
+                            s += f64::from(src[yy as usize * cols + xx as usize]);
+                        }
+                        out[y as usize * cols + x as usize] = (s / (2 * r + 1) as f64) as f32;
+                    }
+                }
+                out
+            };
+            let mut want = h.clone();
+            for along in [true, true, true, false, false, false] {
+                want = pass(&want, along);
+            }
+            let got = gaussian_blur(&h, rows, cols, sigma);
+            let worst = got
+                .iter()
+                .zip(&want)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max);
+            assert!(worst < 1e-5, "sigma {sigma}: worst {worst}");
+        }
     }
 }

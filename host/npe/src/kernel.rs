@@ -1,0 +1,76 @@
+//! The engine's forward pass for one call on plain `f32` values (`ocm_learn::infer`): the
+//! weights, the graph's neighbour lists and the scaled rest positions are laid out once when
+//! the engine is built, so a call allocates a few buffers and builds no tensor. It computes
+//! what [`NpeNet::forward`] computes (tested against it); training and batched evaluation stay
+//! on burn.
+
+use ocm_learn::gcn::Graph;
+use ocm_learn::infer::{DenseDeepSets, DenseGcn, DenseMlp};
+
+use crate::model::{Inputs, NpeConfig, NpeNet};
+
+/// The network of one engine as plain layers.
+#[derive(Debug, Clone)]
+pub struct Kernel {
+    encoder: DenseDeepSets,
+    fusion: DenseMlp,
+    gcn: DenseGcn,
+    readout: DenseMlp,
+    /// Scaled rest positions, `[nodes, 3]`.
+    positions: Vec<f32>,
+    use_geometry: bool,
+    use_force: bool,
+    geometry_features: usize,
+}
+
+impl Kernel {
+    /// Lays out `net` (configured by `cfg`) on `graph` with the scaled rest positions
+    /// `positions` (`[nodes, 3]`, row-major).
+    pub fn new(net: &NpeNet, cfg: &NpeConfig, graph: &Graph, positions: Vec<f32>) -> Self {
+        Kernel {
+            encoder: DenseDeepSets::from_deepsets(&net.encoder),
+            fusion: DenseMlp::from_mlp(&net.fusion),
+            gcn: DenseGcn::new(&net.gcn, graph),
+            readout: DenseMlp::from_mlp(&net.readout),
+            positions,
+            use_geometry: cfg.use_geometry,
+            use_force: cfg.use_force,
+            geometry_features: cfg.geometry_features,
+        }
+    }
+
+    fn nodes(&self) -> usize {
+        self.positions.len() / 3
+    }
+
+    /// h_global of the first sample of `x` (eq 6.10-6.11).
+    pub fn global(&self, x: &Inputs) -> Vec<f32> {
+        let count = x.counts.first().copied().unwrap_or(0);
+        let mut g = if self.use_geometry {
+            self.encoder.forward_set(&x.points[..3 * count])
+        } else {
+            vec![0.0; self.geometry_features]
+        };
+        let force = if self.use_force { x.scalars[0] } else { 0.0 };
+        g.extend([force, x.scalars[1]]);
+        self.fusion.forward_vec(&g)
+    }
+
+    /// Scaled nodal (displacement, force) of the first sample of `x`, `[nodes, 6]`, and its
+    /// h_global.
+    pub fn forward(&self, x: &Inputs) -> (Vec<f32>, Vec<f32>) {
+        let hg = self.global(x);
+        let n = self.nodes();
+        let width = self.gcn.width();
+        let depth = (self.use_geometry && x.node_depth.len() >= n).then(|| &x.node_depth[..n]);
+        let mut h = Vec::with_capacity(n * width);
+        for v in 0..n {
+            h.extend_from_slice(&hg);
+            h.extend_from_slice(&self.positions[3 * v..3 * v + 3]);
+            h.push(depth.map_or(0.0, |d| d[v]));
+        }
+        debug_assert_eq!(h.len(), n * width);
+        self.gcn.forward(&mut h, 1);
+        (self.readout.forward_rows(&h, n), hg)
+    }
+}

@@ -1,0 +1,532 @@
+//! The perception network f_theta (image -> surface displacement, eq 5.9-5.15) and the rendering
+//! network f_theta+ (splatted displacement -> image, eq 5.16-5.22), both U-Nets from
+//! `ocm-learn`, trained on pairs from the tactile FEM and the physically based renderer
+//! ([`pairs`]).
+
+pub mod pairs;
+
+use crate::mask::{Grid, Mask, mask_from_fn};
+use crate::metrics;
+use crate::optics::RgbImage;
+use crate::real::{score_ssim, score_ssim_in};
+use crate::{Result, TactileError};
+use ocm_learn::burn::tensor::{Device, Tensor, TensorData, activation};
+use ocm_learn::mlp::Activation;
+use ocm_learn::{Split, TrainConfig, TrainReport, UNet, UNetConfig, UNetNorm, values};
+use pairs::{Pairs, frame_from_delta};
+use serde::{Deserialize, Serialize};
+
+/// Most negative u_z of the displacement normalisation (eq 5.15's dz_min), m.
+pub const DZ_MIN_M: f64 = -8.0e-4;
+/// Least negative u_z of the normalisation (dz_max), m.
+pub const DZ_MAX_M: f64 = -3.0e-5;
+/// Grey levels per unit of the perception network's input (delta images are within about
+/// +-60 grey levels).
+pub const DELTA_SCALE: f32 = 32.0;
+/// Indentation (-u_z) above which a pixel is in contact, m (the FEM masks' threshold).
+pub const CONTACT_DZ_M: f64 = 30e-6;
+/// Clip scale of the rendering network's displacement input (eq 5.17), m.
+pub const DZ_SCALE_M: f64 = 1e-3;
+/// Fourier frequencies of the positional encoding (eq 5.18).
+pub const FOURIER_FREQS: usize = 4;
+
+/// u_z (m) -> the perception network's target: 0 at dz_min, 1 at dz_max (no clipping, so an
+/// undeformed pixel sits slightly above 1).
+pub fn dz_to_target(dz_m: f64) -> f64 {
+    (dz_m - DZ_MIN_M) / (DZ_MAX_M - DZ_MIN_M)
+}
+
+/// The inverse of [`dz_to_target`], m.
+pub fn target_to_dz(t: f64) -> f64 {
+    DZ_MIN_M + t * (DZ_MAX_M - DZ_MIN_M)
+}
+
+/// Which network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum NetKind {
+    /// Image -> displacement (f_theta).
+    Perception,
+    /// Displacement -> image (f_theta+).
+    Rendering,
+}
+
+impl NetKind {
+    /// Checkpoint architecture name.
+    pub fn architecture(self) -> &'static str {
+        match self {
+            NetKind::Perception => "tactile.perception",
+            NetKind::Rendering => "tactile.rendering",
+        }
+    }
+}
+
+/// A network and the image size it works on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NetConfig {
+    /// Which network.
+    pub kind: NetKind,
+    /// The U-Net.
+    pub unet: UNetConfig,
+    /// Image rows.
+    pub rows: usize,
+    /// Image columns.
+    pub cols: usize,
+}
+
+impl NetConfig {
+    /// f_theta as in eq 5.9-5.14: 3 levels of 32 / 64 / 128 channels, batch norm and ReLU,
+    /// 3 input channels (the delta image), 3 outputs [p_x, p_y, dz].
+    pub fn perception(rows: usize, cols: usize) -> Self {
+        NetConfig {
+            kind: NetKind::Perception,
+            unet: UNetConfig {
+                input: 3,
+                output: 3,
+                widths: vec![32, 64, 128],
+                norm: UNetNorm::Batch,
+                activation: Activation::Relu,
+            },
+            rows,
+            cols,
+        }
+    }
+
+    /// f_theta+: two encoder stages and a bottleneck (16 / 32 / 64 channels; the dissertation
+    /// gives no widths), group norm (8 groups) and GELU; inputs dz, x, y and 4 Fourier
+    /// frequencies of x and y (19 channels); 3 outputs through tanh.
+    pub fn rendering(rows: usize, cols: usize) -> Self {
+        NetConfig {
+            kind: NetKind::Rendering,
+            unet: UNetConfig {
+                input: 3 + 4 * FOURIER_FREQS,
+                output: 3,
+                widths: vec![16, 32, 64],
+                norm: UNetNorm::Group(8),
+                activation: Activation::Gelu,
+            },
+            rows,
+            cols,
+        }
+    }
+
+    /// Builds the network with weights from `seed`; an error if the image size does not fit.
+    pub fn init(&self, device: &Device, seed: u64) -> Result<UNet> {
+        let net = self.unet.init(device, seed)?;
+        net.check_input(self.unet.input, self.rows, self.cols)?;
+        Ok(net)
+    }
+}
+
+/// The rendering network's coordinate channels at every pixel, `[2 + 4 F, rows, cols]`: x and y
+/// in [0, 1] (pixel centres), then for x and y and k = 1..F, sin(2 pi k p) and cos(2 pi k p).
+pub fn coordinate_channels(rows: usize, cols: usize) -> Vec<f32> {
+    let n = rows * cols;
+    let mut v = vec![0.0f32; (2 + 4 * FOURIER_FREQS) * n];
+    for r in 0..rows {
+        for c in 0..cols {
+            let p = [
+                (c as f64 + 0.5) / cols as f64,
+                (r as f64 + 0.5) / rows as f64,
+            ];
+            let i = r * cols + c;
+            v[i] = p[0] as f32;
+            v[n + i] = p[1] as f32;
+            let mut ch = 2;
+            for q in p {
+                for k in 1..=FOURIER_FREQS {
+                    let a = 2.0 * std::f64::consts::PI * k as f64 * q;
+                    v[ch * n + i] = a.sin() as f32;
+                    v[(ch + 1) * n + i] = a.cos() as f32;
+                    ch += 2;
+                }
+            }
+        }
+    }
+    v
+}
+
+/// The inputs and targets of one network, flattened per sample.
+#[derive(Debug, Clone)]
+pub struct NetData {
+    /// Which network.
+    pub kind: NetKind,
+    /// Image rows.
+    pub rows: usize,
+    /// Image columns.
+    pub cols: usize,
+    /// Input channels per sample (coordinates excluded for the rendering network).
+    pub input: Vec<f32>,
+    /// Input channels stored per sample.
+    pub input_channels: usize,
+    /// Target per sample: the normalised dz `[1, rows, cols]` (perception) or delta / 255
+    /// `[3, rows, cols]` (rendering).
+    pub target: Vec<f32>,
+    /// Target channels.
+    pub target_channels: usize,
+    /// Contact mask per sample `[rows, cols]` from the splatted dz (rendering loss, eq 5.20).
+    pub mask: Vec<f32>,
+    coords: Vec<f32>,
+}
+
+impl NetData {
+    /// The inputs and targets of `kind` from rendered pairs.
+    pub fn new(kind: NetKind, p: &Pairs) -> Self {
+        match kind {
+            NetKind::Perception => NetData {
+                kind,
+                rows: p.rows,
+                cols: p.cols,
+                input: p.delta.iter().map(|v| v / DELTA_SCALE).collect(),
+                input_channels: 3,
+                target: p
+                    .dz_m
+                    .iter()
+                    .map(|&v| dz_to_target(f64::from(v)) as f32)
+                    .collect(),
+                target_channels: 1,
+                mask: Vec::new(),
+                coords: Vec::new(),
+            },
+            NetKind::Rendering => NetData {
+                kind,
+                rows: p.rows,
+                cols: p.cols,
+                input: p
+                    .splat_dz_m
+                    .iter()
+                    .map(|&v| (f64::from(v) / DZ_SCALE_M).clamp(-1.0, 1.0) as f32)
+                    .collect(),
+                input_channels: 1,
+                target: p.delta.iter().map(|v| v / 255.0).collect(),
+                target_channels: 3,
+                mask: p
+                    .splat_dz_m
+                    .iter()
+                    .map(|&v| {
+                        if -f64::from(v) > CONTACT_DZ_M {
+                            1.0
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect(),
+                coords: coordinate_channels(p.rows, p.cols),
+            },
+        }
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.target.len() / (self.target_channels * self.rows * self.cols).max(1)
+    }
+
+    /// Whether there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The network input of samples `idx`, `[b, C, rows, cols]`.
+    pub fn inputs(&self, idx: &[usize], device: &Device) -> Tensor<4> {
+        let n = self.rows * self.cols;
+        let per = self.input_channels * n;
+        let c_all = per + self.coords.len();
+        let mut v = Vec::with_capacity(idx.len() * c_all);
+        for &i in idx {
+            v.extend_from_slice(&self.input[i * per..(i + 1) * per]);
+            v.extend_from_slice(&self.coords);
+        }
+        Tensor::from_data(
+            TensorData::new(v, [idx.len(), c_all / n, self.rows, self.cols]),
+            device,
+        )
+    }
+
+    fn rows_of(
+        &self,
+        v: &[f32],
+        per: usize,
+        idx: &[usize],
+        ch: usize,
+        device: &Device,
+    ) -> Tensor<4> {
+        let mut out = Vec::with_capacity(idx.len() * per);
+        for &i in idx {
+            out.extend_from_slice(&v[i * per..(i + 1) * per]);
+        }
+        Tensor::from_data(
+            TensorData::new(out, [idx.len(), ch, self.rows, self.cols]),
+            device,
+        )
+    }
+
+    /// The loss of `net` on the inputs `idx` against the targets of `target_idx` (the same
+    /// samples, or shuffled ones for a control): MSE on the dz channel (eq 5.15) or the masked
+    /// weighted L1 (eq 5.19-5.22).
+    pub fn loss(
+        &self,
+        net: &UNet,
+        idx: &[usize],
+        target_idx: &[usize],
+        device: &Device,
+    ) -> Tensor<1> {
+        let n = self.rows * self.cols;
+        let out = net.forward(self.inputs(idx, device));
+        let target = self.rows_of(
+            &self.target,
+            self.target_channels * n,
+            target_idx,
+            self.target_channels,
+            device,
+        );
+        match self.kind {
+            NetKind::Perception => (out.narrow(1, 2, 1) - target).powi_scalar(2).mean(),
+            NetKind::Rendering => {
+                let pred = activation::tanh(out);
+                let m = self.rows_of(&self.mask, n, target_idx, 1, device);
+                let err = (pred.clone() - target).abs().sum_dim(1);
+                let eps = 1e-6;
+                let inv = m.clone().neg().add_scalar(1.0);
+                let contact = (err.clone() * m.clone()).sum() / (m.sum().add_scalar(eps));
+                let bg = (err * inv.clone()).sum() / (inv.clone().sum().add_scalar(eps));
+                let neutral = (pred * inv).abs().mean();
+                contact + bg.mul_scalar(0.1) + neutral.mul_scalar(0.02)
+            }
+        }
+    }
+
+    /// Network output for samples `idx` in chunks of `chunk`: the predicted dz (m, `[rows,
+    /// cols]` per sample) or delta image (grey levels, `[3, rows, cols]`).
+    pub fn predict(&self, net: &UNet, idx: &[usize], chunk: usize, device: &Device) -> Vec<f32> {
+        let mut out = Vec::new();
+        for b in idx.chunks(chunk.max(1)) {
+            let y = net.forward(self.inputs(b, device));
+            match self.kind {
+                NetKind::Perception => out.extend(
+                    values(y.narrow(1, 2, 1))
+                        .into_iter()
+                        .map(|t| target_to_dz(f64::from(t)) as f32),
+                ),
+                NetKind::Rendering => {
+                    out.extend(values(activation::tanh(y)).into_iter().map(|v| v * 255.0))
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Trains `net` (built on an autodiff device) on `split`; with `shuffle_targets` each training
+/// input is paired with another sample's target (a control that must not learn).
+pub fn train(
+    data: &NetData,
+    net: UNet,
+    split: &Split,
+    cfg: &TrainConfig,
+    shuffle_targets: Option<u64>,
+) -> Result<TrainReport<UNet>> {
+    let mut target_of: Vec<usize> = (0..data.len()).collect();
+    if let Some(seed) = shuffle_targets {
+        use rand::SeedableRng;
+        use rand::seq::SliceRandom;
+        let mut t = split.train.clone();
+        t.shuffle(&mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+        for (a, b) in split.train.iter().zip(t) {
+            target_of[*a] = b;
+        }
+    }
+    Ok(ocm_learn::train_split(net, split, cfg, |m, idx, dev| {
+        let t: Vec<usize> = idx.iter().map(|&i| target_of[i]).collect();
+        data.loss(m, idx, &t, dev)
+    })?)
+}
+
+/// Perception scores on held-out samples.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PerceptionScores {
+    /// Samples scored (a contact in the FEM mask).
+    pub samples: usize,
+    /// Median contact-mask IoU.
+    pub iou_median: f64,
+    /// Mean contact-mask IoU.
+    pub iou_mean: f64,
+    /// Median centroid error, mm.
+    pub centroid_mm_median: f64,
+    /// Median rotation error, rad.
+    pub rotation_rad_median: f64,
+    /// RMSE of u_z over all pixels, m.
+    pub dz_rmse_m: f64,
+    /// Images per second of inference (batches of 8).
+    pub images_per_s: f64,
+}
+
+/// Rendering scores on held-out samples (against the physically based renderer's frames).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RenderingScores {
+    /// Samples scored.
+    pub samples: usize,
+    /// Median L1, grey levels (whole frame).
+    pub l1_median: f64,
+    /// Median PSNR, dB.
+    pub psnr_db_median: f64,
+    /// Median SSIM (whole frame).
+    pub ssim_median: f64,
+    /// Median SSIM over the windows overlapping the contact (samples with contact).
+    pub contact_ssim_median: f64,
+    /// Images per second of inference (batches of 8).
+    pub images_per_s: f64,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.retain(|x| !x.is_nan());
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// The contact mask (-u_z above [`CONTACT_DZ_M`]) of a `[rows, cols]` u_z field on `grid`.
+pub fn contact_mask(grid: Grid, dz_m: &[f32]) -> Mask {
+    mask_from_fn(grid, |r, c| {
+        -f64::from(dz_m[r * grid.cols + c]) > CONTACT_DZ_M
+    })
+}
+
+/// Scores a perception network on samples `idx` of `pairs`.
+pub fn score_perception(
+    net: &UNet,
+    data: &NetData,
+    pairs: &Pairs,
+    idx: &[usize],
+    device: &Device,
+) -> Result<(PerceptionScores, Vec<f32>)> {
+    let t0 = std::time::Instant::now();
+    let pred = data.predict(net, idx, 8, device);
+    let ips = idx.len() as f64 / t0.elapsed().as_secs_f64();
+    let n = pairs.pixels();
+    let grid = pairs.grid();
+    let (mut ious, mut cens, mut rots) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut se, mut count) = (0.0, 0usize);
+    for (k, &i) in idx.iter().enumerate() {
+        let truth = &pairs.dz_m[i * n..(i + 1) * n];
+        let p = &pred[k * n..(k + 1) * n];
+        for (a, b) in truth.iter().zip(p) {
+            se += f64::from(a - b).powi(2);
+            count += 1;
+        }
+        let mt = contact_mask(grid, truth);
+        if mt.count() == 0 {
+            continue;
+        }
+        let mp = contact_mask(grid, p);
+        ious.push(metrics::iou(&mt, &mp)?);
+        if mp.count() > 0 {
+            let (st, sp) = (mt.stats(), mp.stats());
+            cens.push(metrics::centroid_error(&st, &sp) * 1e3);
+            rots.push(metrics::rotation_error(st.angle_rad, sp.angle_rad));
+        }
+    }
+    let samples = ious.len();
+    let mean = ious.iter().sum::<f64>() / samples.max(1) as f64;
+    Ok((
+        PerceptionScores {
+            samples,
+            iou_median: median(ious),
+            iou_mean: mean,
+            centroid_mm_median: median(cens),
+            rotation_rad_median: median(rots),
+            dz_rmse_m: (se / count.max(1) as f64).sqrt(),
+            images_per_s: ips,
+        },
+        pred,
+    ))
+}
+
+/// Scores a rendering network on samples `idx` of `pairs`: its frames (background + predicted
+/// delta) against the physically based renderer's.
+pub fn score_rendering(
+    net: &UNet,
+    data: &NetData,
+    pairs: &Pairs,
+    idx: &[usize],
+    device: &Device,
+) -> Result<(RenderingScores, Vec<RgbImage>)> {
+    let t0 = std::time::Instant::now();
+    let pred = data.predict(net, idx, 8, device);
+    let ips = idx.len() as f64 / t0.elapsed().as_secs_f64();
+    let n = pairs.pixels();
+    let grid = pairs.grid();
+    let (mut l1, mut psnr, mut ssim, mut cssim) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut frames = Vec::new();
+    for (k, &i) in idx.iter().enumerate() {
+        let img = frame_from_delta(&pairs.background, &pred[k * 3 * n..(k + 1) * 3 * n]);
+        let truth = pairs.frame(i);
+        let (a, b) = (img.to_f64(), truth.to_f64());
+        l1.push(metrics::l1(&a, &b)?);
+        psnr.push(metrics::psnr(&a, &b, 255.0)?);
+        ssim.push(score_ssim(&img, &truth)?);
+        let m = contact_mask(grid, &pairs.dz_m[i * n..(i + 1) * n]);
+        if let Some(region) = crate::real::contact_region(&m) {
+            cssim.push(score_ssim_in(&img, &truth, &region)?);
+        }
+        frames.push(img);
+    }
+    Ok((
+        RenderingScores {
+            samples: idx.len(),
+            l1_median: median(l1),
+            psnr_db_median: median(psnr),
+            ssim_median: median(ssim),
+            contact_ssim_median: median(cssim),
+            images_per_s: ips,
+        },
+        frames,
+    ))
+}
+
+/// Checks that an image can go through a network of `rows` x `cols`: RGB of exactly that size.
+pub fn check_image(img: &RgbImage, rows: usize, cols: usize, what: &str) -> Result<()> {
+    if (img.rows, img.cols) != (rows, cols) || img.data.len() != rows * cols * 3 {
+        return Err(TactileError::Input(format!(
+            "{what} is {} x {} (cols x rows) with {} bytes; the network takes {cols} x {rows} RGB",
+            img.cols,
+            img.rows,
+            img.data.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Writes a trained network with its configuration and `meta` (seed, data, losses).
+pub fn save(
+    path: &std::path::Path,
+    net: &UNet,
+    cfg: &NetConfig,
+    meta: serde_json::Value,
+) -> Result<()> {
+    Ok(ocm_learn::save_checkpoint(
+        path,
+        net,
+        &ocm_learn::checkpoint::CheckpointInfo {
+            architecture: cfg.kind.architecture(),
+            config: cfg,
+            scalers: Default::default(),
+            meta,
+        },
+    )?)
+}
+
+/// Reads a network written by [`save`] onto `device`; an error names a file that holds another
+/// architecture or does not match its configuration.
+pub fn load(path: &std::path::Path, device: &Device) -> Result<(UNet, NetConfig)> {
+    let ck = ocm_learn::Checkpoint::read(path)?;
+    let cfg: NetConfig = ck.config()?;
+    let net = cfg.init(device, 0)?;
+    let net = ck.load_into(net, cfg.kind.architecture(), &cfg)?;
+    Ok((net, cfg))
+}
