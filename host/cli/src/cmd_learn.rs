@@ -340,12 +340,10 @@ fn run_bench(a: BenchArgs) -> Result<()> {
         .with_context(|| format!("loading {}", a.forward.display()))?;
     let (m, f) = (fwd.config.window, fwd.config.step_dim());
     let device = cpu();
-    let input = |b: usize| {
-        let v: Vec<f32> = (0..b * m * f).map(|i| ((i as f32) * 0.37).sin()).collect();
-        Tensor::<3>::from_data(TensorData::new(v, [b, m, f]), &device)
-    };
+    // The same windows for both paths.
     let raw =
         |b: usize| -> Vec<f32> { (0..b * m * f).map(|i| ((i as f32) * 0.37).sin()).collect() };
+    let input = |b: usize| Tensor::<3>::from_data(TensorData::new(raw(b), [b, m, f]), &device);
     let run = |b: usize, reps: usize| -> Vec<f64> {
         (0..reps)
             .map(|_| {

@@ -12,6 +12,7 @@ use rayon::prelude::*;
 use crate::error::{LearnError, Result};
 use crate::gcn::LAYER_NORM_EPSILON;
 use crate::infer::DenseLayer;
+use crate::mlp::Activation;
 use crate::sequence::SequenceEncoder;
 use crate::values;
 
@@ -109,6 +110,15 @@ struct Scratch {
     last: Vec<f32>,
 }
 
+/// The last step's row of each of `c` windows of `steps` rows, `d` wide, into `out`.
+fn last_rows(x: &[f32], c: usize, steps: usize, d: usize, out: &mut Vec<f32>) {
+    out.clear();
+    for w in 0..c {
+        let r = w * steps + steps - 1;
+        out.extend_from_slice(&x[r * d..(r + 1) * d]);
+    }
+}
+
 /// A [`SequenceEncoder`] as plain layers, evaluating [`SequenceEncoder::forward_last`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct DenseSequenceEncoder {
@@ -199,11 +209,7 @@ impl DenseSequenceEncoder {
             b.value.forward_rows(&s.a, rows, &mut s.v);
             let q_per = if last_only { 1 } else { steps };
             if last_only {
-                s.last.clear();
-                for w in 0..c {
-                    let r = w * steps + steps - 1;
-                    s.last.extend_from_slice(&s.a[r * d..(r + 1) * d]);
-                }
+                last_rows(&s.a, c, steps, d, &mut s.last);
                 b.query.forward_rows(&s.last, c, &mut s.q);
             } else {
                 b.query.forward_rows(&s.a, rows, &mut s.q);
@@ -211,12 +217,8 @@ impl DenseSequenceEncoder {
             self.attend(c, steps, q_per, s);
             b.output.forward_rows(&s.ctx, c * q_per, &mut s.o);
             if last_only {
-                let mut hl = Vec::with_capacity(c * d);
-                for w in 0..c {
-                    let r = w * steps + steps - 1;
-                    hl.extend_from_slice(&h[r * d..(r + 1) * d]);
-                }
-                h = hl;
+                last_rows(&h, c, steps, d, &mut s.last);
+                std::mem::swap(&mut h, &mut s.last);
             }
             for (v, o) in h.iter_mut().zip(&s.o) {
                 *v += o;
@@ -224,9 +226,7 @@ impl DenseSequenceEncoder {
             let hr = c * q_per;
             b.norm_ff.rows(&h, &mut s.f);
             b.inner.forward_rows(&s.f, hr, &mut s.g);
-            for v in s.g.iter_mut() {
-                *v = v.max(0.0);
-            }
+            Activation::Relu.apply_slice(&mut s.g);
             b.outer.forward_rows(&s.g, hr, &mut s.f);
             for (v, o) in h.iter_mut().zip(&s.f) {
                 *v += o;

@@ -10,12 +10,13 @@
 //! of every k-th training snapshot instead of the Euclidean one).
 use nalgebra::{DMatrix, DVector};
 use ocm_fem::bellows::{Bellows, BellowsConfig};
+use ocm_mor::curve::projected_tcp_rmse_mm;
 use ocm_mor::drive::DriveConfig;
 use ocm_mor::pod::{PodOptions, Truncation, pod};
 use ocm_mor::rom::ReducedModel;
 use ocm_mor::run::{median, simulate_reduced, tcp_rmse_mm};
 use ocm_mor::store::{self, ReducedProbe};
-use ocm_mor::xs::{XS_DIM, XsProbe};
+use ocm_mor::xs::XsProbe;
 use std::path::PathBuf;
 
 fn main() -> ocm_mor::Result<()> {
@@ -88,22 +89,8 @@ fn main() -> ocm_mor::Result<()> {
         let gal = ReducedModel::galerkin(&b.model, v.clone(), &b.top_face)?;
         let rp = ReducedProbe::new(probe.clone(), &gal);
         let tcp0 = rp.compact_state(&DVector::zeros(r), &DVector::zeros(r));
-        // Basis floor: TCP of V V^T u for every held-out snapshot.
-        let (mut sq, mut cnt) = (0.0, 0usize);
-        for (k, _, xs_full) in &held {
-            let rows: Vec<[f64; 2 * XS_DIM]> = (0..s.rec.steps)
-                .map(|j| {
-                    let row = k * s.rec.steps + j;
-                    let u = DVector::from_column_slice(&s.disp.data[row * n..(row + 1) * n]);
-                    let q = v.transpose() * u;
-                    rp.compact_state(&q, &DVector::zeros(r))
-                })
-                .collect();
-            let e = tcp_rmse_mm(&rows, xs_full)?;
-            sq += e * e * rows.len() as f64;
-            cnt += rows.len();
-        }
-        println!("{r},projection,0,0,{:.4},0,0", (sq / cnt as f64).sqrt());
+        let floor = projected_tcp_rmse_mm(&s, &v, &rp, &held)?;
+        println!("{r},projection,0,0,{floor:.4},0,0");
         if std::env::var("MOR_ENERGY").is_ok() {
             let strain = ocm_mor::rom::straining_elements(&b.model);
             let energy = |u: &[f64]| -> f64 {

@@ -202,8 +202,9 @@ type HeldOut = (
     Vec<[f64; 2 * crate::xs::XS_DIM]>,
 );
 
-/// Held-out TCP RMSE of the stored full displacements projected on `basis`, mm.
-fn projected_tcp_rmse_mm(
+/// Held-out TCP RMSE of the stored full displacements projected on `basis`, mm: the floor of
+/// any reduced model on that basis.
+pub fn projected_tcp_rmse_mm(
     s: &Snapshots,
     basis: &DMatrix<f64>,
     probe: &ReducedProbe,

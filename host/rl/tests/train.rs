@@ -2,8 +2,7 @@
 //! deterministic, checkpoints round-trip.
 
 mod common;
-use common::robot;
-use ocm_learn::TrainConfig;
+use common::{quick_train, robot};
 use ocm_rl::bc;
 use ocm_rl::env::{Env, EnvConfig};
 use ocm_rl::eval::evaluate;
@@ -13,19 +12,6 @@ use ocm_rl::sac::{self, SacConfig};
 use ocm_rl::tasks::TaskKind;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-
-fn quick_train() -> TrainConfig {
-    TrainConfig {
-        epochs: 80,
-        batch_size: 128,
-        learning_rate: 3e-3,
-        val_fraction: 0.0,
-        patience: 0,
-        grad_clip_norm: None,
-        seed: 0,
-        progress: false,
-    }
-}
 
 /// Margin of the short-training test: BC's mean circle error must be below this fraction of a
 /// uniformly random policy's.

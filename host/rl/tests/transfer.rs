@@ -3,9 +3,8 @@
 //! chamber cut and its recovery, and the reduced-FEM plant against the reduced statics.
 
 mod common;
-use common::robot;
+use common::{quick_train, robot};
 use nalgebra::{DMatrix, Vector3};
-use ocm_learn::TrainConfig;
 use ocm_rl::bc;
 use ocm_rl::env::{Env, EnvConfig};
 use ocm_rl::eval::evaluate;
@@ -123,17 +122,7 @@ fn an_exact_map_reproduces_the_environment_and_a_trained_policy_transfers() {
     // A BC policy transfers through the filter; the zero action (the middle of every range)
     // does not track.
     let demos = bc::collect(&r, &env_cfg, 12, 0.03, 0, 2).unwrap();
-    let train = TrainConfig {
-        epochs: 80,
-        batch_size: 128,
-        learning_rate: 3e-3,
-        val_fraction: 0.0,
-        patience: 0,
-        grad_clip_norm: None,
-        seed: 0,
-        progress: false,
-    };
-    let (policy, _) = bc::fit(&demos, &[64, 64], &train, 0).unwrap();
+    let (policy, _) = bc::fit(&demos, &[64, 64], &quick_train(), 0).unwrap();
     let cfg = TransferConfig {
         filter_window: 2,
         ..TransferConfig::default()

@@ -1,5 +1,6 @@
-//! The robot the tests share.
+//! The robot and the short training settings the tests share.
 
+use ocm_learn::TrainConfig;
 use ocm_rl::env::PHYSICS_DT_S;
 use ocm_rl::robot::Robot;
 use ocm_surrogate::chain::ChainGeometry;
@@ -20,4 +21,20 @@ pub fn robot() -> Arc<Robot> {
         dummy_mass_kg: 1e-5,
     };
     Arc::new(Robot::new(&chain, &Limits::default(), PHYSICS_DT_S).unwrap())
+}
+
+/// A short behaviour-cloning run: enough to beat a random policy, seconds to train.
+// Each test binary compiles this module; the environment tests train nothing.
+#[allow(dead_code)]
+pub fn quick_train() -> TrainConfig {
+    TrainConfig {
+        epochs: 80,
+        batch_size: 128,
+        learning_rate: 3e-3,
+        val_fraction: 0.0,
+        patience: 0,
+        grad_clip_norm: None,
+        seed: 0,
+        progress: false,
+    }
 }
