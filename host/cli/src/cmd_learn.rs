@@ -11,7 +11,7 @@ use ocm_dynamics::lumped::demo_system;
 use ocm_dynamics::synth::lumped_trajectories;
 use ocm_dynamics::{
     ForwardConfig, InverseConfig, Samples, TrainedForward, TrainedInverse, Trajectory,
-    train_forward, train_inverse,
+    continue_forward, train_forward, train_inverse,
 };
 use ocm_learn::{TrainConfig, cpu, write_curve};
 
@@ -119,7 +119,11 @@ fn run_train(a: TrainArgs) -> Result<()> {
                 config.n_layers = 1;
                 config.d_ff = 128;
             }
-            let (model, curve) = train_forward(&train, &config, &cfg, a.lambda, a.seed)?;
+            let (model, curve) = match &a.init_from {
+                Some(init) => continue_forward(&train, init, &cfg, a.lambda)?,
+                None => train_forward(&train, &config, &cfg, a.lambda, a.seed)?,
+            };
+            let config = model.config.clone();
             let path = a.out.join("forward.ckpt");
             model.save(&path)?;
             write_curve(&a.out, "loss", "forward model", &curve)?;
@@ -150,7 +154,10 @@ fn run_train(a: TrainArgs) -> Result<()> {
             let (model, curve) = train_inverse(
                 &train,
                 &fwd,
-                &InverseConfig::dissertation(n),
+                &InverseConfig {
+                    current_velocity: !a.no_current_velocity,
+                    ..InverseConfig::dissertation(n)
+                },
                 &cfg,
                 a.beta,
                 a.seed,
@@ -158,7 +165,7 @@ fn run_train(a: TrainArgs) -> Result<()> {
             let path = a.out.join("inverse.ckpt");
             model.save(&path)?;
             write_curve(&a.out, "loss", "inverse model", &curve)?;
-            let m = evaluate_inverse(&model.model, &model.scalers, &test, &cpu())?;
+            let m = evaluate_inverse(&model.model, &model.config, &model.scalers, &test, &cpu())?;
             serde_json::json!({
                 "model": "inverse", "checkpoint": path, "forward": fpath,
                 "train_sequences": train.len(), "test_sequences": test.len(),
@@ -231,7 +238,13 @@ fn run_eval(a: EvalArgs) -> Result<()> {
         Some(p) => {
             let inv =
                 TrainedInverse::load(p).with_context(|| format!("loading {}", p.display()))?;
-            Some(evaluate_inverse(&inv.model, &inv.scalers, &test, &cpu())?)
+            Some(evaluate_inverse(
+                &inv.model,
+                &inv.config,
+                &inv.scalers,
+                &test,
+                &cpu(),
+            )?)
         }
         None => None,
     };

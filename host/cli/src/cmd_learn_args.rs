@@ -88,6 +88,10 @@ pub struct TrainArgs {
     /// Cycle weight beta of the inverse loss.
     #[arg(long, default_value_t = DEFAULT_BETA)]
     pub beta: f64,
+    /// Leave the current velocity dX_S/dt(t) out of the inverse model's input (eq 4.17's
+    /// input list read literally: [X_S(t), tau(t), dX_S/dt(t+1)]).
+    #[arg(long)]
+    pub no_current_velocity: bool,
     /// Early-stopping patience in epochs, 0: never (default: 30; 20 for the mapping networks).
     #[arg(long)]
     pub patience: Option<usize>,
@@ -100,6 +104,10 @@ pub struct TrainArgs {
     /// Seed of weights, split and shuffling.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Continue training this forward checkpoint (its shape and scalings) instead of starting
+    /// from random weights: a second stage at a lower --lr.
+    #[arg(long, conflicts_with = "small")]
+    pub init_from: Option<PathBuf>,
     /// A smaller forward model (d_model 64, one block) for quick runs.
     #[arg(long)]
     pub small: bool,

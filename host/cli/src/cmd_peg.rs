@@ -105,6 +105,21 @@ pub enum PegCommand {
         /// per frame (npe_displacement.npy, npe_force.npy).
         #[arg(long)]
         npe: Option<PathBuf>,
+        /// With --npe: render the engine's displacement of both pads through the DIGIT
+        /// renderer (ocm-tactile's optics: calibration digit/optics/taxim_polycalib.npz over
+        /// the background digit/real-frames-edge6/edge6_00.jpg) into images/tactile_NNNN.png,
+        /// left pad | right pad.
+        #[arg(long)]
+        images: bool,
+        /// Render every N-th frame (and the last).
+        #[arg(long, default_value_t = 1)]
+        every: usize,
+        /// Gel mesh the engine was trained on (in the data folder's digit/).
+        #[arg(long, default_value = "DIGIT_v8.vtk")]
+        mesh: String,
+        /// Data directory (default: OCM_DATA_DIR, else ../shared/data).
+        #[arg(long)]
+        data: Option<PathBuf>,
         /// Print a JSON summary.
         #[arg(long)]
         json: bool,
@@ -407,8 +422,16 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             demo,
             out,
             npe,
+            images,
+            every,
+            mesh,
+            data,
             json,
         } => {
+            anyhow::ensure!(
+                !images || npe.is_some(),
+                "--images renders the engine's fields: pass --npe with a trained engine"
+            );
             mkdir(&out)?;
             let engine = npe
                 .as_deref()
@@ -452,6 +475,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             pb.finish_and_clear();
             write_frames(&out, &frames, error, enc.name())?;
             let mut npe_force = None;
+            let mut written_images: Option<Vec<PathBuf>> = None;
             if let Some(e) = &engine {
                 let pb = bar(frames.len(), "NPE fields");
                 let t = std::time::Instant::now();
@@ -459,6 +483,16 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 pb.finish_and_clear();
                 let secs = t.elapsed().as_secs_f64();
                 write_npe_fields(&out, &fields, e)?;
+                if images {
+                    written_images = Some(render_images(
+                        &out.join("images"),
+                        &fields,
+                        e,
+                        data.as_deref(),
+                        &mesh,
+                        every,
+                    )?);
+                }
                 npe_force = Some((
                     fields
                         .iter()
@@ -517,6 +551,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 "final_tip_m": frames.last().map(|f| f.tip_m),
                 "encoder": enc.name(),
                 "npe_fields_s": npe_force.as_ref().map(|(_, s)| s),
+                "images": written_images.as_ref().map(Vec::len),
                 "out": out,
             });
             if json {
@@ -527,4 +562,32 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             Ok(())
         }
     }
+}
+
+/// Renders the engine's fields of every `every`-th frame into `dir` (see `--images`).
+fn render_images(
+    dir: &Path,
+    fields: &[[ocm_npe::Fields; 2]],
+    npe: &NpeEncoder,
+    data: Option<&Path>,
+    mesh: &str,
+    every: usize,
+) -> anyhow::Result<Vec<PathBuf>> {
+    use ocm_tactile::gel::{Gel, GelMaterial};
+    use ocm_tactile::optics::{PolyCalib, Renderer, RgbImage};
+    use ocm_tactile::real::{COLS, ROWS};
+    let digit = ocm_datadir::data_file(data, "digit")?;
+    let gel = Gel::digit(digit.join(mesh), GelMaterial::default())?;
+    let calib = PolyCalib::from_npz(digit.join("optics/taxim_polycalib.npz"))?;
+    let bg = RgbImage::read_sized(digit.join("real-frames-edge6/edge6_00.jpg"), ROWS, COLS)?;
+    let imager =
+        ocm_peg::images::TactileImager::new(&gel, Renderer::new(calib, &bg)?, &npe.npe().surface)
+            .with_context(|| format!("the engine and the mesh {mesh}"))?;
+    let pb = bar(0, "tactile images");
+    let written = ocm_peg::images::write_images(dir, fields, &imager, every, &mut |k, n| {
+        pb.set_length(n as u64);
+        pb.set_position(k as u64);
+    })?;
+    pb.finish_and_clear();
+    Ok(written)
 }

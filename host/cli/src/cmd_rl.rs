@@ -17,7 +17,7 @@ use ocm_rl::robot::Robot;
 use ocm_rl::sac::{self, SacConfig};
 use ocm_rl::tasks::{Episode, TaskKind};
 use ocm_rl::transfer::{
-    self, Disconnect, RomAssets, SurrogatePlant, TransferConfig, evaluate_on_plant,
+    self, Admittance, Disconnect, RomAssets, SurrogatePlant, TransferConfig, evaluate_on_plant,
 };
 use ocm_surrogate::model::SurrogateModel;
 use std::path::{Path, PathBuf};
@@ -100,6 +100,10 @@ pub enum RlCommand {
         /// Evaluation episodes of 100 points after training.
         #[arg(long, default_value_t = 5)]
         eval_episodes: usize,
+        /// PPO: episodes (seeds 1,000,000..) on which the policy is scored during training to
+        /// keep the best.
+        #[arg(long, default_value_t = 2)]
+        select_episodes: usize,
         /// PPO and SAC: start from this policy checkpoint (a BC policy.ckpt).
         #[arg(long)]
         init_from: Option<PathBuf>,
@@ -116,8 +120,8 @@ pub enum RlCommand {
         /// SAC with --init-from: gradient steps fitting the actor to the initial policy.
         #[arg(long, default_value_t = 2000)]
         pretrain_steps: usize,
-        /// SAC with --init-from: weight of the squared distance to the initial policy's action
-        /// in the actor loss.
+        /// PPO and SAC with --init-from: weight of the squared distance to the initial policy's
+        /// action in the actor loss.
         #[arg(long, default_value_t = 0.0)]
         bc_weight: f64,
         /// Output folder.
@@ -244,6 +248,14 @@ pub struct DeployArgs {
     /// Length of the cut, s.
     #[arg(long, default_value_t = 5.0)]
     disconnect_for_s: f64,
+    /// Close the force loop outside the policy: an admittance layer moves the commanded TCP
+    /// by this many mm per N of normal force error and command (paths with a target force; 0:
+    /// off).
+    #[arg(long, default_value_t = 0.5)]
+    admittance_mm_per_n: f64,
+    /// Largest offset of the admittance layer, mm.
+    #[arg(long, default_value_t = 10.0)]
+    admittance_max_mm: f64,
 }
 
 impl DeployArgs {
@@ -263,6 +275,10 @@ impl DeployArgs {
             filter_window: self.filter_window,
             laps: self.laps,
             disconnect,
+            admittance: (self.admittance_mm_per_n != 0.0).then_some(Admittance {
+                gain_m_per_n: self.admittance_mm_per_n * 1e-3,
+                max_offset_m: self.admittance_max_mm * 1e-3,
+            }),
             ..TransferConfig::default()
         })
     }
@@ -392,6 +408,24 @@ fn write_json(path: &Path, v: &serde_json::Value) -> anyhow::Result<()> {
         .with_context(|| format!("writing {}", path.display()))
 }
 
+/// The first episode's steps (TCP, target, forces), one row per scored command.
+fn write_steps_csv(path: &Path, r: &EvalReport) -> anyhow::Result<()> {
+    use std::fmt::Write as _;
+    let mut t = String::from(
+        "step,point,tcp_x_m,tcp_y_m,tcp_z_m,target_x_m,target_y_m,target_z_m,\
+         force_x_n,force_y_n,force_z_n,force_target_x_n,force_target_y_n,force_target_z_n\n",
+    );
+    for (i, s) in r.first_episode.iter().enumerate() {
+        let v: Vec<String> = [s.tcp_m, s.target_m, s.force_n, s.force_target_n]
+            .iter()
+            .flatten()
+            .map(|x| format!("{x:e}"))
+            .collect();
+        writeln!(t, "{i},{},{}", s.point, v.join(","))?;
+    }
+    std::fs::write(path, t).with_context(|| format!("writing {}", path.display()))
+}
+
 fn summary(r: &EvalReport) -> serde_json::Value {
     serde_json::json!({
         "episodes": r.episodes,
@@ -466,6 +500,7 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
             envs,
             threads,
             eval_episodes,
+            select_episodes,
             init_from,
             std,
             learning_rate,
@@ -528,6 +563,8 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                         std_end,
                         init_from: init_from.clone(),
                         critic_warmup,
+                        bc_weight,
+                        eval_episodes: select_episodes,
                         learning_rate: learning_rate.unwrap_or(PpoConfig::default().learning_rate),
                         ..PpoConfig::default()
                     };
@@ -696,6 +733,7 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                     "plant": r.plant,
                     "settings": r.config,
                     "disconnect": r.disconnect,
+                    "admittance_offset_mm": r.admittance_offset_mm,
                     "wall_seconds": t0.elapsed().as_secs_f64(),
                 });
                 (r.eval, extra)
@@ -710,6 +748,7 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                     plot_error_over_time(out, kind, &who, plant, &deploy, &report)?;
                 }
                 write_json(&out.join("eval.json"), &v)?;
+                write_steps_csv(&out.join("first_episode.csv"), &report)?;
             }
             if json {
                 println!("{}", serde_json::to_string_pretty(&v)?);

@@ -22,6 +22,15 @@ pub enum MeshArg {
     Coarse,
 }
 
+/// Which model computes a data set's fields.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum DatasetModel {
+    /// The full contact FEM.
+    Fem,
+    /// The POD-reduced model (`ocm tactile reduce`).
+    Reduced,
+}
+
 /// Tactile subcommands.
 #[derive(clap::Subcommand, Debug)]
 pub enum TactileCommand {
@@ -83,8 +92,9 @@ pub enum TactileCommand {
         #[arg(long)]
         calib: Option<PathBuf>,
         /// Camera map with the fitted gain and smoothing (JSON, as `compare-real` writes to
-        /// map.json). Default: the image is the mask grid (columns along gel x, rows along y,
-        /// 0.0625 mm per pixel), calibrated gain 1, no smoothing.
+        /// map.json). Default: the networks' landscape frame (rows along gel x, columns along
+        /// gel y, 0.0625 mm per pixel on DIGIT_v8; a larger gel is scaled to fit), calibrated
+        /// gain 1, no smoothing.
         #[arg(long)]
         map: Option<PathBuf>,
         /// Render every this many steps (and the last).
@@ -129,6 +139,14 @@ pub enum TactileCommand {
         /// grey levels.
         #[arg(long, default_value_t = 10.0)]
         threshold: f64,
+        /// Reuse the map and step offset of an earlier run (its map.json) instead of fitting
+        /// them (the slow part); the optics are fitted anew.
+        #[arg(long)]
+        fit: Option<PathBuf>,
+        /// Optical parameters fitted on the even frames beside the smoothing: one gain on the
+        /// calibrated change, or a colour transform and a depth shading.
+        #[arg(long, value_enum, default_value = "colour-depth")]
+        optics: OpticsArg,
         /// Output folder.
         #[arg(long, default_value = "out/tactile/compare-real")]
         out: PathBuf,
@@ -161,6 +179,32 @@ pub enum TactileCommand {
         /// Only set-ups whose FEM cache folder exists (assemble what has been computed).
         #[arg(long)]
         cached_only: bool,
+        /// Random placements added to the set-ups: positions over the top face and rotations
+        /// about z of the `--random-from` indenters.
+        #[arg(long, default_value_t = 0)]
+        random: usize,
+        /// Seed of the random placements.
+        #[arg(long, default_value_t = 0)]
+        random_seed: u64,
+        /// Set-ups whose indenters are placed at random (comma-separated; default: all seen).
+        #[arg(long, value_delimiter = ',')]
+        random_from: Vec<String>,
+        /// Margin between the tip centre and the top face's edge for random placements, mm.
+        #[arg(long, default_value_t = 2.0)]
+        random_margin_mm: f64,
+        /// Only the random placements (not the set-up files' placements).
+        #[arg(long)]
+        random_only: bool,
+        /// Which model computes the fields: the full FEM (cached per set-up) or the reduced
+        /// model of `ocm tactile reduce` (resumable: set-ups already in --out are kept).
+        #[arg(long, value_enum, default_value = "fem")]
+        model: DatasetModel,
+        /// The reduced model's folder (for --model reduced).
+        #[arg(long, default_value = "out/tactile/rom")]
+        rom: PathBuf,
+        /// Threads of the reduced model's signed-distance queries.
+        #[arg(long, default_value_t = 2)]
+        threads: usize,
         /// FEM cache: one folder per set-up of u_NNN.npy / f_NNN.npy.
         #[arg(long, default_value = "out/npe/fem")]
         cache: PathBuf,
@@ -171,6 +215,11 @@ pub enum TactileCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Builds the reduced tactile model (eq 5.1-5.5): POD of the full-FEM displacement fields
+    /// (whole gel) of every cached set-up not held out, the reduced stiffness at rest, saved as
+    /// NPY with rom.json; with --bench, runs it through the held-out set-ups' depths and prints
+    /// frames per second and the nodal RMSE against their FEM.
+    Reduce(ReduceArgs),
     /// Compares two images: as masks (grey > 127) IoU, centroid and rotation errors in pixels
     /// and radians; as grey images L1, PSNR and SSIM.
     Metrics {
@@ -195,6 +244,7 @@ pub enum TactileCommand {
 /// Runs an `ocm tactile` subcommand.
 pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
     match cmd {
+        TactileCommand::Reduce(a) => reduce(a),
         TactileCommand::Train(a) => crate::cmd_tactile_net::train(a),
         TactileCommand::Perceive(a) => crate::cmd_tactile_net::perceive(a),
         TactileCommand::Indent {
@@ -346,6 +396,8 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             fem,
             steps,
             threshold,
+            fit,
+            optics,
             out,
             json,
         } => compare_real(CompareArgs {
@@ -355,6 +407,8 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             fem,
             steps,
             threshold,
+            fit,
+            optics,
             out,
             json,
         }),
@@ -366,6 +420,14 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             spacing_mm,
             setups,
             cached_only,
+            random,
+            random_seed,
+            random_from,
+            random_margin_mm,
+            random_only,
+            model,
+            rom,
+            threads,
             cache,
             out,
             json,
@@ -380,9 +442,35 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             if let Some(bad) = setups.iter().find(|n| !all.iter().any(|s| &s.name == *n)) {
                 bail!("no set-up named '{bad}'");
             }
+            if let Some(bad) = random_from
+                .iter()
+                .find(|n| !all.iter().any(|s| &s.name == *n))
+            {
+                bail!("--random-from: no set-up named '{bad}'");
+            }
+            let base: Vec<_> = all
+                .iter()
+                .filter(|s| {
+                    if random_from.is_empty() {
+                        !s.unseen
+                    } else {
+                        random_from.contains(&s.name)
+                    }
+                })
+                .cloned()
+                .collect();
+            let placed = ocm_tactile::dataset::random_setups(
+                &gel,
+                &base,
+                random,
+                random_seed,
+                random_margin_mm * 1e-3,
+            )?;
             let chosen: Vec<_> = all
                 .into_iter()
+                .filter(|_| !random_only)
                 .filter(|s| setups.is_empty() || setups.contains(&s.name))
+                .chain(placed)
                 .filter(|s| !cached_only || cache.join(&s.name).is_dir())
                 .collect();
             let opts = ocm_tactile::dataset::DatasetOptions {
@@ -391,31 +479,44 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 grid_spacing_m: spacing_mm * 1e-3,
             };
             let pb = bar(chosen.len(), "dataset");
-            let m = ocm_tactile::dataset::build(
-                &gel,
-                mesh_file,
-                &chosen,
-                &opts,
-                &cache,
-                &out,
-                |n, _| {
-                    pb.set_message(format!("dataset {n}"));
-                    pb.inc(1);
-                },
-            )?;
+            let t0 = std::time::Instant::now();
+            let tick = |n: &str, _| {
+                pb.set_message(format!("dataset {n}"));
+                pb.inc(1);
+            };
+            let m = match model {
+                DatasetModel::Fem => ocm_tactile::dataset::build(
+                    &gel, mesh_file, &chosen, &opts, &cache, &out, tick,
+                )?,
+                DatasetModel::Reduced => {
+                    let rm = ocm_tactile::reduced::ReducedModel::load(&rom)?;
+                    let ro =
+                        ocm_tactile::reduced::ReducedOptions::for_modulus(gel.material.young_pa);
+                    rayon_pool(threads)?.install(|| {
+                        ocm_tactile::dataset::build_reduced(
+                            &gel, mesh_file, &chosen, &opts, &rm, &rom, ro, &out, tick,
+                        )
+                    })?
+                }
+            };
             pb.finish_and_clear();
+            let secs = t0.elapsed().as_secs_f64();
             if json {
                 println!("{}", serde_json::to_string_pretty(&m)?);
             } else {
                 let samples: usize = m.setups.iter().map(|s| s.samples).sum();
                 println!(
-                    "{} samples of {} set-ups ({} stopped early) on {} ({} top nodes) in {}",
+                    "{} samples of {} set-ups ({} stopped early) on {} ({} top nodes) in {} \
+                     ({:.1} s, {:.1} samples/s, model {})",
                     samples,
                     m.setups.len(),
                     m.stopped.len(),
                     mesh_file,
                     m.top_nodes,
-                    out.display()
+                    out.display(),
+                    secs,
+                    samples as f64 / secs,
+                    m.model
                 );
             }
             Ok(())
@@ -537,11 +638,18 @@ fn render(a: RenderArgs) -> anyhow::Result<()> {
     let mut renderer = Renderer::new(calib, &bg)?;
     let map = match &a.map {
         Some(p) => {
-            let text =
-                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-            let v: serde_json::Value = serde_json::from_str(&text)
-                .with_context(|| format!("{} is not JSON", p.display()))?;
+            let v = read_map_json(p)?;
             // The optics fitted by compare-real travel with the map.
+            if let Some(m) = v.get("colour") {
+                let m: [[f32; 3]; 3] = serde_json::from_value(m.clone())
+                    .with_context(|| format!("{}: colour is not 3 x 3", p.display()))?;
+                renderer.colour = m;
+            }
+            if let Some(g) = v.get("depth_gain_per_m") {
+                renderer.depth_gain = serde_json::from_value(g.clone()).with_context(|| {
+                    format!("{}: depth_gain_per_m is not 3 numbers", p.display())
+                })?;
+            }
             if let Some(g) = v.get("gain").and_then(serde_json::Value::as_f64) {
                 renderer.gain = g as f32;
             }
@@ -551,7 +659,8 @@ fn render(a: RenderArgs) -> anyhow::Result<()> {
             serde_json::from_value::<CameraMap>(v.get("map").cloned().unwrap_or(v))
                 .with_context(|| format!("{}: no camera map", p.display()))?
         }
-        None => CameraMap::for_grid(&Grid::for_gel(&gel)),
+        // The networks' landscape frame: the whole gel in the 240 x 320 image.
+        None => ocm_tactile::optics::camera::fit_landscape(&gel, ROWS, COLS),
     };
     let sampler = SurfaceSampler::new(&gel, ROWS, COLS, &map);
     let steps = field_steps(&a.fields)?;
@@ -643,8 +752,25 @@ struct CompareArgs {
     fem: PathBuf,
     steps: usize,
     threshold: f64,
+    fit: Option<PathBuf>,
+    optics: OpticsArg,
     out: PathBuf,
     json: bool,
+}
+
+/// Optical parameters `compare-real` fits.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum OpticsArg {
+    /// One gain on the calibrated colour change.
+    Gain,
+    /// A 3 x 3 colour transform of the calibrated change and a depth shading per channel.
+    ColourDepth,
+}
+
+/// Reads map.json as `compare-real` writes it (or a bare camera map).
+fn read_map_json(p: &std::path::Path) -> anyhow::Result<serde_json::Value> {
+    let text = std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{} is not JSON", p.display()))
 }
 
 fn median(v: &[f64]) -> f64 {
@@ -715,11 +841,35 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             outputs.into_iter().map(|o| o.displacement).collect()
         }
     };
+    let fixed_fit = match &a.fit {
+        Some(p) => {
+            let v = read_map_json(p)?;
+            Some(real::MaskFit {
+                map: serde_json::from_value(v.get("map").cloned().unwrap_or_default())
+                    .with_context(|| format!("{}: no camera map", p.display()))?,
+                offset_steps: v
+                    .get("offset_steps")
+                    .and_then(serde_json::Value::as_u64)
+                    .with_context(|| format!("{}: no offset_steps", p.display()))?
+                    as usize,
+                fit_iou: v
+                    .get("fit_iou")
+                    .and_then(serde_json::Value::as_f64)
+                    .unwrap_or(f64::NAN),
+            })
+        }
+        None => None,
+    };
     let opts = CompareOptions {
         mask: MaskOptions {
             threshold: a.threshold,
             ..MaskOptions::default()
         },
+        optics: match a.optics {
+            OpticsArg::Gain => real::OpticsFit::Gain,
+            OpticsArg::ColourDepth => real::OpticsFit::ColourDepth,
+        },
+        fixed_fit,
         ..CompareOptions::default()
     };
     let calib = PolyCalib::from_npz(digit.join("optics/taxim_polycalib.npz"))?;
@@ -793,8 +943,12 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             "per_depth": c.masks,
         },
         "render": {
+            "optics": format!("{:?}", opts.optics),
             "gain_fitted": c.gain,
             "smooth_px_fitted": c.smooth_px,
+            "colour_fitted": c.colour,
+            "depth_gain_per_m_fitted": c.depth_gain,
+            "scalar_gain_only": summary_render(&c.render_scalar_gain),
             "fit_ssim": c.fit_ssim,
             "fitted_gain": summary_render(&c.render),
             "calibrated_gain_1": summary_render(&c.render_gain1),
@@ -816,8 +970,12 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         a.out.join("map.json"),
         serde_json::to_string_pretty(&serde_json::json!({
             "map": c.fit.map,
+            "offset_steps": c.fit.offset_steps,
+            "fit_iou": c.fit.fit_iou,
             "gain": c.gain,
             "smooth_px": c.smooth_px,
+            "colour": c.colour,
+            "depth_gain_per_m": c.depth_gain,
         }))?,
     )?;
     let plot_iou = Chart {
@@ -863,6 +1021,275 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             median(&col(&c.render, |r| r.l1)),
             median(&col(&c.render, |r| r.psnr_db)),
             median(&col(&c.render, |r| r.mask_iou)),
+            a.out.display()
+        );
+    }
+    Ok(())
+}
+
+/// Arguments of `ocm tactile reduce`.
+#[derive(clap::Args, Debug)]
+pub struct ReduceArgs {
+    /// Data directory (default: OCM_DATA_DIR, else ../shared/data).
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Gel mesh.
+    #[arg(long, value_enum, default_value = "fine")]
+    mesh: MeshArg,
+    /// FEM folders: set-up folders of u_NNN.npy, or folders of them (comma-separated).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "out/npe/fem,out/tactile/fem-random"
+    )]
+    fem: Vec<PathBuf>,
+    /// Set-ups kept out of the basis and scored by --bench (comma-separated names; default:
+    /// the unseen indenters' set-ups).
+    #[arg(long, value_delimiter = ',')]
+    holdout: Vec<String>,
+    /// Depth step of FEM folders that stopped before writing force_depth.csv, um.
+    #[arg(long, default_value_t = 50.0)]
+    step_um: f64,
+    /// Modes kept.
+    #[arg(long, default_value_t = 40)]
+    rank: usize,
+    /// Power iterations of the randomized SVD.
+    #[arg(long, default_value_t = 2)]
+    power_iterations: usize,
+    /// Seed of the randomized SVD.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Where the model is written (or read with --load).
+    #[arg(long, default_value = "out/tactile/rom")]
+    out: PathBuf,
+    /// Read the model in --out instead of building it.
+    #[arg(long)]
+    load: bool,
+    /// Score on the held-out set-ups: frames per second and nodal RMSE against the FEM.
+    #[arg(long)]
+    bench: bool,
+    /// Bench with only the first K modes of the model (comma-separated ranks; default: all).
+    #[arg(long, value_delimiter = ',')]
+    ranks: Vec<usize>,
+    /// Factor on the reduced model's default normal penalty (1/100 of the full model's).
+    #[arg(long, default_value_t = 1.0)]
+    penalty_scale: f64,
+    /// Augmented-Lagrangian multiplier updates per reduced frame.
+    #[arg(long, default_value_t = 0)]
+    updates: usize,
+    /// Threads for the signed-distance queries.
+    #[arg(long, default_value_t = 2)]
+    threads: usize,
+    /// Timed repeats of each held-out sequence.
+    #[arg(long, default_value_t = 5)]
+    repeats: usize,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Set-up folders (holding u_001.npy) under the given FEM roots, by name.
+fn fem_folders(roots: &[PathBuf]) -> anyhow::Result<Vec<(String, PathBuf)>> {
+    let mut out = Vec::new();
+    for root in roots {
+        if root.join("u_001.npy").is_file() {
+            let name = root
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            out.push((name, root.clone()));
+            continue;
+        }
+        let mut sub: Vec<PathBuf> = std::fs::read_dir(root)
+            .with_context(|| format!("FEM folder {}", root.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.join("u_001.npy").is_file() && p.join("f_001.npy").is_file())
+            .collect();
+        sub.sort();
+        for p in sub {
+            let name = p
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            out.push((name, p));
+        }
+    }
+    Ok(out)
+}
+
+fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
+    use ocm_tactile::reduced::{FemSequence, ReducedModel, ReducedOptions, score_sequence};
+    let digit = ocm_datadir::data_file(a.data.as_deref(), "digit")?;
+    let mesh_file = mesh_file(a.mesh);
+    let gel = Gel::digit(digit.join(mesh_file), GelMaterial::default())?;
+    let all = digit_setups(&digit)?;
+    let holdout: Vec<String> = if a.holdout.is_empty() {
+        all.iter()
+            .filter(|s| s.unseen)
+            .map(|s| s.name.clone())
+            .collect()
+    } else {
+        a.holdout.clone()
+    };
+    let folders = fem_folders(&a.fem)?;
+    if !a.holdout.is_empty()
+        && let Some(bad) = holdout
+            .iter()
+            .find(|h| !folders.iter().any(|(n, _)| n == *h))
+    {
+        bail!("--holdout: no FEM folder named '{bad}' under the --fem folders");
+    }
+    let t0 = std::time::Instant::now();
+    let model = if a.load {
+        let m = ReducedModel::load(&a.out)?;
+        m.check_gel(&gel)?;
+        m
+    } else {
+        let train: Vec<&(String, PathBuf)> = folders
+            .iter()
+            .filter(|(n, _)| !holdout.contains(n))
+            .collect();
+        if train.is_empty() {
+            bail!("no FEM folder left to build the basis from");
+        }
+        let pb = bar(train.len(), "snapshots");
+        let mut snaps = Vec::new();
+        let mut sources = Vec::new();
+        for (name, dir) in &train {
+            let seq = FemSequence::read(dir, gel.num_nodes(), Some(a.step_um * 1e-6))?;
+            snaps.extend(seq.displacement);
+            sources.push(name.clone());
+            pb.inc(1);
+        }
+        pb.finish_and_clear();
+        let opts = ocm_mor::pod::PodOptions {
+            truncation: ocm_mor::pod::Truncation::Rank(a.rank),
+            oversampling: 10,
+            power_iterations: a.power_iterations,
+            seed: a.seed,
+        };
+        let m = ReducedModel::build(&gel, mesh_file, &snaps, sources, &opts)?;
+        m.save(&a.out)?;
+        m
+    };
+    let build_s = t0.elapsed().as_secs_f64();
+    let mut report = serde_json::json!({
+        "model": a.out,
+        "rank": model.rank(),
+        "snapshots": model.info.snapshots,
+        "set_ups": model.info.sources.len(),
+        "captured_energy": model.info.captured_energy,
+        "build_seconds": build_s,
+    });
+    if a.bench {
+        let pool = rayon_pool(a.threads)?;
+        let ranks = if a.ranks.is_empty() {
+            vec![model.rank()]
+        } else {
+            a.ranks.clone()
+        };
+        let mut seqs = Vec::new();
+        for h in &holdout {
+            let Some((_, dir)) = folders.iter().find(|(n, _)| n == h) else {
+                continue;
+            };
+            let js = dir.join("setup.json");
+            let setup = if js.is_file() {
+                ocm_tactile::setup::Setup::read_json(&js, &digit)?
+            } else {
+                all.iter()
+                    .find(|s| &s.name == h)
+                    .cloned()
+                    .with_context(|| {
+                        format!("{}: no setup.json and no set-up named '{h}'", dir.display())
+                    })?
+            };
+            seqs.push((
+                setup,
+                FemSequence::read(dir, gel.num_nodes(), Some(a.step_um * 1e-6))?,
+            ));
+        }
+        let mut per_rank = Vec::new();
+        for &r in &ranks {
+            let m = model.truncated(r)?;
+            let mut opts = ReducedOptions::for_modulus(gel.material.young_pa);
+            opts.normal_penalty_pa_m *= a.penalty_scale;
+            opts.max_updates = a.updates;
+            let mut scores = Vec::new();
+            for (setup, seq) in &seqs {
+                scores
+                    .push(pool.install(|| score_sequence(&m, &gel, setup, seq, opts, a.repeats))?);
+            }
+            // Frames per second of each repeat over all sequences together; the median repeat.
+            let frames: usize = scores.iter().map(|s| s.frames).sum();
+            let fps: Vec<f64> = (0..a.repeats.max(1))
+                .map(|k| frames as f64 / scores.iter().map(|s| s.seconds[k]).sum::<f64>())
+                .collect();
+            let all_rmse: Vec<f64> = scores.iter().flat_map(|s| s.rmse_m.clone()).collect();
+            let top_rmse: Vec<f64> = scores.iter().flat_map(|s| s.rmse_top_m.clone()).collect();
+            let proj: Vec<f64> = scores
+                .iter()
+                .flat_map(|s| s.projection_rmse_m.clone())
+                .collect();
+            let max = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
+            let entry = serde_json::json!({
+                "rank": r,
+                "frames": frames,
+                "frames_per_s_median": median(&fps),
+                "frames_per_s": fps,
+                "rmse_mm_median": median(&all_rmse) * 1e3,
+                "rmse_mm_max": max(&all_rmse) * 1e3,
+                "rmse_top_mm_median": median(&top_rmse) * 1e3,
+                "rmse_top_mm_max": max(&top_rmse) * 1e3,
+                "projection_rmse_mm_median": median(&proj) * 1e3,
+                "projection_rmse_mm_max": max(&proj) * 1e3,
+                "passes_per_frame": scores.iter().map(|s| s.passes as f64).sum::<f64>() / frames as f64,
+                "queries_per_frame": scores.iter().map(|s| s.queries as f64).sum::<f64>() / frames as f64,
+                "max_penetration_um": scores.iter().map(|s| s.max_penetration_m).fold(0.0, f64::max) * 1e6,
+                "set_ups": scores.iter().map(|s| serde_json::json!({
+                    "setup": s.setup,
+                    "frames": s.frames,
+                    "rmse_mm_max": max(&s.rmse_m) * 1e3,
+                    "rmse_top_mm_max": max(&s.rmse_top_m) * 1e3,
+                    "projection_rmse_mm_max": max(&s.projection_rmse_m) * 1e3,
+                    "force_z_n_last": s.force_z_n.last(),
+                })).collect::<Vec<_>>(),
+            });
+            if !a.json {
+                println!(
+                    "rank {r}: {:.0} frames/s (median of {} repeats, {} frames, {} threads, {:.1} passes \
+                     and {:.0} queries per frame); nodal RMSE median {:.4} / max {:.4} mm (top face \
+                     {:.4} / {:.4}; projection {:.4} / {:.4}); penetration up to {:.1} um",
+                    median(&fps),
+                    fps.len(),
+                    frames,
+                    a.threads,
+                    entry["passes_per_frame"].as_f64().unwrap_or(0.0),
+                    entry["queries_per_frame"].as_f64().unwrap_or(0.0),
+                    median(&all_rmse) * 1e3,
+                    max(&all_rmse) * 1e3,
+                    median(&top_rmse) * 1e3,
+                    max(&top_rmse) * 1e3,
+                    median(&proj) * 1e3,
+                    max(&proj) * 1e3,
+                    entry["max_penetration_um"].as_f64().unwrap_or(0.0)
+                );
+            }
+            per_rank.push(entry);
+        }
+        report["bench"] = serde_json::Value::Array(per_rank);
+        report["held_out"] =
+            serde_json::json!(seqs.iter().map(|(s, _)| s.name.clone()).collect::<Vec<_>>());
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        println!(
+            "reduced model: rank {} from {} snapshots of {} set-ups ({:.4} of the energy) in {}",
+            model.rank(),
+            model.info.snapshots,
+            model.info.sources.len(),
+            model.info.captured_energy,
             a.out.display()
         );
     }

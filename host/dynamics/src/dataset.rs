@@ -1,4 +1,11 @@
 //! Trajectories from the reduced-FEM data sets written by `ocm mor` (NPY + JSON manifest).
+//!
+//! A data-set row holds the inputs of a step and the state *after* that step (its manifest says
+//! so); a [`Trajectory`] step holds the state at `t` and the inputs applied from `t` to `t + 1`.
+//! Trajectory step `i` is therefore the state of row `i` with the inputs of row `i + 1`, and a
+//! sequence of `n` rows gives `n - 1` steps (the rest state before row 0 is not stored). Without
+//! this shift the input that drives a transition would sit one step after the window that is
+//! meant to predict it.
 
 use std::path::Path;
 
@@ -91,14 +98,20 @@ fn group_sequences(ds: &Dataset) -> Result<Vec<Trajectory>> {
             });
         }
         let t = out.last_mut().expect("a sequence was started");
-        t.pressure_kpa
-            .extend_from_slice(&ds.arrays[ip][r * PRESSURE_DIM..(r + 1) * PRESSURE_DIM]);
-        t.force_n
-            .extend_from_slice(&ds.arrays[iforce][r * FORCE_DIM..(r + 1) * FORCE_DIM]);
-        t.state
-            .extend_from_slice(&ds.arrays[ix][r * n..(r + 1) * n]);
-        t.velocity
-            .extend_from_slice(&ds.arrays[iv][r * n..(r + 1) * n]);
+        // Row r's inputs drive the step that ends at row r: they belong to the previous state.
+        if step != 0.0 {
+            t.pressure_kpa
+                .extend_from_slice(&ds.arrays[ip][r * PRESSURE_DIM..(r + 1) * PRESSURE_DIM]);
+            t.force_n
+                .extend_from_slice(&ds.arrays[iforce][r * FORCE_DIM..(r + 1) * FORCE_DIM]);
+        }
+        let next_in_sequence = r + 1 < rows && seq[2 * (r + 1)] == s;
+        if next_in_sequence {
+            t.state
+                .extend_from_slice(&ds.arrays[ix][r * n..(r + 1) * n]);
+            t.velocity
+                .extend_from_slice(&ds.arrays[iv][r * n..(r + 1) * n]);
+        }
     }
     Ok(out)
 }

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
 use crate::forward::ForwardModel;
-use crate::inverse::InverseModel;
+use crate::inverse::{InverseConfig, InverseModel};
 use crate::samples::{Samples, Scalers};
 use crate::trajectory::{FORCE_DIM, PRESSURE_DIM, Trajectory};
 
@@ -186,25 +186,26 @@ pub fn rollout_errors(
     Ok((b, sum / (b * horizon) as f64, last / b as f64))
 }
 
-/// Pressure errors of the inverse model on all samples of `trajs`.
+/// Pressure errors of the inverse model (of shape `config`) on all samples of `trajs`.
 pub fn evaluate_inverse(
     model: &InverseModel,
+    config: &InverseConfig,
     scalers: &Scalers,
     trajs: &[Trajectory],
     device: &Device,
 ) -> Result<InverseMetrics> {
     let data = Samples::build(trajs, 1, scalers, None)?;
-    let n = data.state_dim;
-    let cols = 2 * n + FORCE_DIM;
+    let cols = config.input_dim();
+    if cols > data.inverse_cols {
+        return Err(crate::DynamicsError::Data(format!(
+            "the inverse model takes {cols} inputs, its scalings cover {}",
+            data.inverse_cols
+        )));
+    }
     let (mut abs, mut sq) = (0.0, 0.0);
     let idx: Vec<usize> = (0..data.len()).collect();
     for batch in idx.chunks(4096) {
-        let x = tensor2(
-            Samples::rows(&data.inverse_input, cols, batch),
-            batch.len(),
-            cols,
-            device,
-        );
+        let x = tensor2(data.inverse_rows(cols, batch), batch.len(), cols, device);
         let p_hat = scalers.pressure.invert(&values(model.forward(x)))?;
         for (r, &s) in batch.iter().enumerate() {
             let (ti, k) = data.origin[s];

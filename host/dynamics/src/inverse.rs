@@ -21,20 +21,31 @@ pub struct InverseConfig {
     pub state_dim: usize,
     /// Hidden widths.
     pub hidden: Vec<usize>,
+    /// Whether the input holds the current velocity dX_S/dt(t) as part of the system state
+    /// (absent in checkpoints written before it existed: false).
+    #[serde(default)]
+    pub current_velocity: bool,
 }
 
 impl InverseConfig {
-    /// Three hidden layers of 128 with ReLU.
+    /// Three hidden layers of 128 with ReLU, the current velocity in the input (the state of
+    /// a second-order system; see the crate's README).
     pub fn dissertation(state_dim: usize) -> Self {
         Self {
             state_dim,
             hidden: vec![128; 3],
+            current_velocity: true,
         }
     }
 
-    /// Input features: X_S, tau, dX_S/dt.
+    /// Input features: X_S, tau, dX_S/dt(t+1), and dX_S/dt(t) with `current_velocity`.
     pub fn input_dim(&self) -> usize {
-        2 * self.state_dim + FORCE_DIM
+        let v = if self.current_velocity {
+            self.state_dim
+        } else {
+            0
+        };
+        2 * self.state_dim + FORCE_DIM + v
     }
 
     /// Builds the model with weights drawn from `seed`.
@@ -135,9 +146,11 @@ impl CycleTarget {
 }
 
 /// `mean (P_hat - P)^2 + beta mean (f_S(X'_t) - v)^2`, scaled units; `cycle` None gives the
-/// supervised term alone.
+/// supervised term alone. `cols` is the model's input width ([`InverseConfig::input_dim`]).
+#[allow(clippy::too_many_arguments)]
 pub fn inverse_loss(
     model: &InverseModel,
+    cols: usize,
     data: &Samples,
     cycle: Option<&CycleTarget>,
     beta: f64,
@@ -146,12 +159,7 @@ pub fn inverse_loss(
 ) -> Tensor<1> {
     let n = data.state_dim;
     let b = batch.len();
-    let x = tensor2(
-        Samples::rows(&data.inverse_input, 2 * n + FORCE_DIM, batch),
-        b,
-        2 * n + FORCE_DIM,
-        device,
-    );
+    let x = tensor2(data.inverse_rows(cols, batch), b, cols, device);
     let p_hat = model.forward(x);
     let p = tensor2(
         Samples::rows(&data.pressure, PRESSURE_DIM, batch),

@@ -21,6 +21,8 @@ pub use forward::{ForwardConfig, ForwardModel};
 pub use inverse::{InverseConfig, InverseModel};
 pub use lumped::LumpedModel;
 pub use mapping::{MapConfig, MapRole, SurrogateMlp, TrainedMap};
-pub use pipeline::{TrainedForward, TrainedInverse, train_forward, train_inverse};
+pub use pipeline::{
+    TrainedForward, TrainedInverse, continue_forward, train_forward, train_inverse,
+};
 pub use samples::{Samples, Scalers};
 pub use trajectory::Trajectory;

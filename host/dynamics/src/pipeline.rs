@@ -27,7 +27,8 @@ pub const DEFAULT_BETA: f64 = 0.1;
 pub struct ModelMeta {
     /// Time step of the training data, s.
     pub dt_s: f64,
-    /// Spread of the finite-difference acceleration per component (the residual's scale).
+    /// The residual's scale per component ([`Scalers::accel`]; checkpoints written before the
+    /// residual was scaled as a velocity defect hold the acceleration's spread here).
     pub accel_scale: Vec<f64>,
     /// The lumped model of the physics residual.
     pub lumped: LumpedModel,
@@ -117,6 +118,57 @@ pub fn train_forward(
     ))
 }
 
+/// Continues training the forward model stored at `init` on `trajs` (a second stage at a lower
+/// learning rate, say): its shape, scalings and lumped model are kept, so `trajs` should be the
+/// trajectories it was trained on. Returns the model and the curve of this stage.
+pub fn continue_forward(
+    trajs: &[Trajectory],
+    init: &Path,
+    train_cfg: &TrainConfig,
+    lambda: f64,
+) -> Result<(TrainedForward, Vec<EpochRecord>)> {
+    let (dt, n) = check_set(trajs)?;
+    let start = TrainedForward::load(init)?;
+    if start.config.state_dim != n || (start.meta.dt_s - dt).abs() > 1e-12 * dt {
+        return Err(DynamicsError::Data(format!(
+            "{} holds a model of {} state components at dt {} s, the data has {n} at {dt} s",
+            init.display(),
+            start.config.state_dim,
+            start.meta.dt_s
+        )));
+    }
+    let ck = Checkpoint::read(init)?;
+    let model = ck.load_into(
+        start.config.init(&cpu_autodiff(), start.meta.weight_seed),
+        forward::ARCHITECTURE,
+        &start.config,
+    )?;
+    let lumped = start.meta.lumped.clone();
+    let scalers = start.scalers.clone();
+    let data = Samples::build(trajs, start.config.window, &scalers, Some(&lumped))?;
+    let slope_t = scaled_slope_t(&lumped, &scalers, dt);
+    let report = train(model, data.len(), train_cfg, |m, batch, device| {
+        forward_loss(m, &data, &slope_t, lambda, batch, device)
+    })?;
+    let meta = ModelMeta {
+        loss_weight: lambda,
+        train: train_cfg.clone(),
+        best_epoch: report.best_epoch,
+        best_loss: report.best_loss,
+        samples: data.len(),
+        ..start.meta
+    };
+    Ok((
+        TrainedForward {
+            config: start.config,
+            model: report.model,
+            scalers,
+            meta,
+        },
+        report.curve,
+    ))
+}
+
 /// Trains the inverse model on `trajs` with the cycle loss through `forward` (frozen).
 pub fn train_inverse(
     trajs: &[Trajectory],
@@ -135,11 +187,20 @@ pub fn train_inverse(
     }
     let scalers = forward.scalers.clone();
     let data = Samples::build(trajs, forward.config.window, &scalers, None)?;
+    let cols = config.input_dim();
+    if cols > data.inverse_cols {
+        return Err(DynamicsError::Data(format!(
+            "the inverse model takes {cols} inputs, the forward model's scalings cover {} \
+             (a checkpoint from before the current velocity was an input: retrain the forward \
+             model, or leave the current velocity out)",
+            data.inverse_cols
+        )));
+    }
     let (ad, plain) = (cpu_autodiff(), cpu());
     let cycle = CycleTarget::new(&forward.model, &scalers, &ad, &plain);
     let model = config.init(&ad, weight_seed);
     let report = train(model, data.len(), train_cfg, |m, batch, device: &Device| {
-        inverse_loss(m, &data, Some(&cycle), beta, batch, device)
+        inverse_loss(m, cols, &data, Some(&cycle), beta, batch, device)
     })?;
     let meta = ModelMeta {
         dt_s: dt,

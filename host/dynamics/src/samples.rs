@@ -18,21 +18,26 @@ pub struct Scalers {
     pub velocity: Standardizer,
     /// Chamber pressures (the inverse target).
     pub pressure: Standardizer,
-    /// Inverse input `[X_S(t), tau(t), dX_S/dt(t+1)]`.
+    /// Inverse input `[X_S(t), tau(t), dX_S/dt(t+1), dX_S/dt(t)]` (checkpoints written before
+    /// the current velocity was added hold the first `2n + 3` columns only).
     pub inverse_input: Standardizer,
-    /// Scale of the residual per component (spread of the finite-difference acceleration).
+    /// Scale of the residual per component, 1/s times the velocity's unit: the velocity spread
+    /// per time step, `sigma_v / dt`. In these units the residual is the velocity defect of
+    /// one step in the velocity's own scaled units, so its slope in the scaled prediction is
+    /// about the identity and lambda weighs the physics target against the data target one to
+    /// one (with the spread of the acceleration instead, the slope was 1.6-3.7 on the bellows
+    /// data and the physics term outweighed the data term 2:1 at lambda = 0.15).
     pub accel: Vec<f64>,
 }
 
 impl Scalers {
     /// Fits all scalings on `trajs`.
     pub fn fit(trajs: &[Trajectory]) -> Result<Self> {
-        let (_, n) = check_set(trajs)?;
+        let (dt, n) = check_set(trajs)?;
         let mut step = Vec::new();
         let mut vel = Vec::new();
         let mut pres = Vec::new();
         let mut inv = Vec::new();
-        let mut acc = Vec::new();
         for t in trajs {
             for k in 0..t.len() {
                 step.extend_from_slice(t.x(k));
@@ -44,16 +49,17 @@ impl Scalers {
                     inv.extend_from_slice(t.x(k));
                     inv.extend_from_slice(t.f(k));
                     inv.extend_from_slice(t.v(k + 1));
-                    acc.extend(t.v(k + 1).iter().zip(t.v(k)).map(|(a, b)| (a - b) / t.dt_s));
+                    inv.extend_from_slice(t.v(k));
                 }
             }
         }
-        let accel = Standardizer::fit(&acc, n)?.std;
+        let velocity = Standardizer::fit(&vel, n)?;
+        let accel = velocity.std.iter().map(|s| s / dt).collect();
         Ok(Self {
             step: Standardizer::fit(&step, n + PRESSURE_DIM + FORCE_DIM)?,
-            velocity: Standardizer::fit(&vel, n)?,
+            velocity,
             pressure: Standardizer::fit(&pres, PRESSURE_DIM)?,
-            inverse_input: Standardizer::fit(&inv, 2 * n + FORCE_DIM)?,
+            inverse_input: Standardizer::fit(&inv, 3 * n + FORCE_DIM)?,
             accel,
         })
     }
@@ -81,8 +87,11 @@ pub struct Samples {
     pub target: Vec<f32>,
     /// Scaled residual offset `b_t` (zero without a lumped model), per sample.
     pub residual_offset: Vec<f32>,
-    /// Scaled inverse input, per sample.
+    /// Scaled inverse input, per sample ([`Samples::inverse_cols`] columns).
     pub inverse_input: Vec<f32>,
+    /// Columns of the inverse input: `3n + 3` with the current velocity, `2n + 3` for scalers
+    /// of older checkpoints without it.
+    pub inverse_cols: usize,
     /// Scaled P_S(t), per sample.
     pub pressure: Vec<f32>,
     /// Trajectory and step `t` of each sample.
@@ -118,6 +127,14 @@ impl Samples {
             )));
         }
         let slope = lumped.map(|l| l.residual_slope(dt));
+        let inverse_cols = scalers.inverse_input.dim();
+        if inverse_cols != 3 * n + FORCE_DIM && inverse_cols != 2 * n + FORCE_DIM {
+            return Err(DynamicsError::Data(format!(
+                "inverse input scaling has {inverse_cols} columns, expected {} or {}",
+                3 * n + FORCE_DIM,
+                2 * n + FORCE_DIM
+            )));
+        }
         let mut out = Self {
             window,
             state_dim: n,
@@ -127,6 +144,7 @@ impl Samples {
             target: Vec::new(),
             residual_offset: Vec::new(),
             inverse_input: Vec::new(),
+            inverse_cols,
             pressure: Vec::new(),
             origin: Vec::new(),
         };
@@ -146,6 +164,9 @@ impl Samples {
                 let mut inv = t.x(k).to_vec();
                 inv.extend_from_slice(t.f(k));
                 inv.extend_from_slice(t.v(k + 1));
+                if inverse_cols > 2 * n + FORCE_DIM {
+                    inv.extend_from_slice(t.v(k));
+                }
                 out.inverse_input.extend(scalers.inverse_input.apply(&inv)?);
                 out.pressure.extend(scalers.pressure.apply(t.p(k))?);
                 match (lumped, &slope) {
@@ -196,6 +217,17 @@ impl Samples {
             let last = self.last_row[s];
             let first = last + 1 - self.window;
             v.extend_from_slice(&self.steps[first * f..(last + 1) * f]);
+        }
+        v
+    }
+
+    /// The scaled inverse inputs of `batch`, the first `cols` columns of each (`2n + 3` leaves
+    /// out the current velocity).
+    pub fn inverse_rows(&self, cols: usize, batch: &[usize]) -> Vec<f32> {
+        let all = self.inverse_cols;
+        let mut v = Vec::with_capacity(batch.len() * cols);
+        for &s in batch {
+            v.extend_from_slice(&self.inverse_input[s * all..s * all + cols.min(all)]);
         }
         v
     }

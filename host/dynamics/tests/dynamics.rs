@@ -9,7 +9,7 @@ use ocm_dynamics::samples::scaled_slope_t;
 use ocm_dynamics::synth::lumped_trajectories;
 use ocm_dynamics::{
     ForwardConfig, InverseConfig, LumpedModel, Samples, Scalers, TrainedForward, TrainedInverse,
-    Trajectory, train_forward, train_inverse,
+    Trajectory, continue_forward, train_forward, train_inverse,
 };
 use ocm_learn::burn::tensor::{Tensor, TensorData};
 use ocm_learn::{TrainConfig, cpu, cpu_autodiff, tensor2, values};
@@ -215,6 +215,23 @@ fn forward_and_inverse_learn_the_lumped_system_and_survive_checkpoints() {
         diff <= 1e-6 * scale,
         "a reloaded forward model predicts as before: max difference {diff:e} of {scale:e}"
     );
+    // A second stage from the checkpoint starts where the first ended, not from scratch.
+    let lower = TrainConfig {
+        learning_rate: 2e-4,
+        ..quick(2, 1)
+    };
+    let (more, more_curve) = continue_forward(train_set, &fpath, &lower, 0.15).unwrap();
+    eprintln!(
+        "second stage: first val {:.3e}, stage one best {:.3e}, from scratch {:.3e}",
+        more_curve[0].val_loss, fwd.meta.best_loss, curve[0].val_loss
+    );
+    assert!(more_curve[0].val_loss < 2.0 * fwd.meta.best_loss);
+    assert!(more_curve[0].val_loss < 0.2 * curve[0].val_loss);
+    assert_eq!(more.scalers, back.scalers);
+    assert_eq!(more.meta.lumped, back.meta.lumped);
+    // Data of another shape is refused.
+    let other = lumped_trajectories(&demo_system(4, 4).unwrap(), 2, 100, 0.01, 1);
+    assert!(continue_forward(&other, &fpath, &lower, 0.15).is_err());
     // JSON keeps the lumped model to the last bit or one unit in the last place.
     let (l0, l1) = (&fwd.meta.lumped, &back.meta.lumped);
     for (a, b) in l0
@@ -272,7 +289,7 @@ fn forward_and_inverse_learn_the_lumped_system_and_survive_checkpoints() {
     )
     .unwrap();
     assert!(icurve.last().unwrap().val_loss < icurve[0].val_loss);
-    let im = evaluate_inverse(&inv.model, &inv.scalers, test_set, &cpu()).unwrap();
+    let im = evaluate_inverse(&inv.model, &inv.config, &inv.scalers, test_set, &cpu()).unwrap();
     // Baseline: the mean training pressure.
     let mut base = 0.0;
     let mut count = 0.0;
@@ -293,7 +310,14 @@ fn forward_and_inverse_learn_the_lumped_system_and_survive_checkpoints() {
     let ipath = dir.join("inverse.ckpt");
     inv.save(&ipath).unwrap();
     let iback = TrainedInverse::load(&ipath).unwrap();
-    let again = evaluate_inverse(&iback.model, &iback.scalers, test_set, &cpu()).unwrap();
+    let again = evaluate_inverse(
+        &iback.model,
+        &iback.config,
+        &iback.scalers,
+        test_set,
+        &cpu(),
+    )
+    .unwrap();
     assert!(
         (again.pressure_mae_kpa - im.pressure_mae_kpa).abs() < 1e-9 * im.pressure_mae_kpa,
         "{again:?} vs {im:?}"

@@ -2,7 +2,7 @@
 //! two-degree-of-freedom oscillator driven by a force and measured in displacement, with an
 //! effect inside the dynamics generated in a form other than the extensions (Bouc-Wen
 //! restoring force of random shape, LuGre friction, a transport delay interpolated between
-//! samples, cubic stiffening). Everything follows from the seed.
+//! samples, cubic stiffening), or two of them at once. Everything follows from the seed.
 
 use ocm_lutgen::hysteresis::{BoucWen, BoucWenShape};
 use rand::{Rng, SeedableRng};
@@ -28,12 +28,13 @@ pub enum System {
 }
 
 /// What to generate.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct DynSpec {
     /// The system.
     pub system: System,
-    /// The hidden effect (`None` for a clean control).
-    pub effect: Cause,
+    /// The hidden effects, acting together (empty or `[None]` for a clean control); a
+    /// cause given twice acts once.
+    pub effects: Vec<Cause>,
     /// Seed.
     pub seed: u64,
     /// Rows.
@@ -45,8 +46,11 @@ pub struct DynSpec {
 pub struct DynGenerated {
     /// The record (`series`: `u_force_n`, `y_x_m`).
     pub record: Record,
-    /// Effect RMS on the output over noise RMS.
+    /// Effect RMS on the output over noise RMS (all effects together).
     pub ratio: f64,
+    /// Per hidden effect, in the order given: its RMS on the output when it acts alone, over
+    /// the noise RMS.
+    pub ratios: Vec<f64>,
     /// Parameters drawn, in words.
     pub details: String,
 }
@@ -81,65 +85,111 @@ pub fn generate(spec: &DynSpec) -> DynGenerated {
                 * ((0.31 * t + ph[0]).sin() + (1.3 * t + ph[1]).sin() + (3.7 * t + ph[2]).sin());
     }
     let u = signal::lowpass(&u, &time(n), &[0], 0.05);
-    let clean = simulate(spec.system, k, c, &u, &Effect::None);
+    let clean = simulate(spec.system, k, c, &u, &[]);
     let span = signal::mean_std(&clean).1;
-    let (effect, details) = match spec.effect {
-        Cause::Hysteresis => {
-            let beta = rng.random_range(0.2..0.8);
-            let z0 = span * rng.random_range(0.05..0.3);
-            let alpha = rng.random_range(0.1..0.4);
-            (
-                Effect::BoucWen {
-                    force: alpha * k * z0,
-                    z0,
-                    shape: BoucWenShape {
-                        beta,
-                        gamma: 1.0 - beta,
+    let draw = |cause: Cause, rng: &mut ChaCha8Rng| -> (Effect, String) {
+        match cause {
+            Cause::Hysteresis => {
+                let beta = rng.random_range(0.2..0.8);
+                let z0 = span * rng.random_range(0.05..0.3);
+                let alpha = rng.random_range(0.1..0.4);
+                (
+                    Effect::BoucWen {
+                        force: alpha * k * z0,
+                        z0,
+                        shape: BoucWenShape {
+                            beta,
+                            gamma: 1.0 - beta,
+                        },
                     },
-                },
-                format!(
-                    "Bouc-Wen restoring force, beta {beta:.2}, travel {z0:.3e}, {alpha:.2} k z0"
-                ),
-            )
+                    format!(
+                        "Bouc-Wen restoring force, beta {beta:.2}, travel {z0:.3e}, {alpha:.2} k z0"
+                    ),
+                )
+            }
+            Cause::Friction => {
+                let fc = k * span * rng.random_range(0.05..0.2);
+                let fs = fc * rng.random_range(1.1..1.6);
+                let vs = wn * span * rng.random_range(0.05..0.2);
+                (
+                    Effect::LuGre {
+                        fc,
+                        fs,
+                        vs,
+                        sigma0: fc / (1e-2 * span),
+                        sigma1: 2.0 * (fc / (1e-2 * span)).sqrt(),
+                        sigma2: 0.0,
+                    },
+                    format!("LuGre friction Fc {fc:.3e}, Fs {fs:.3e}, vs {vs:.3e}"),
+                )
+            }
+            Cause::Latency => {
+                let d = rng.random_range(2.3..12.7);
+                (
+                    Effect::Delay(d),
+                    format!("transport delay {:.3} s (interpolated)", d * DT_S),
+                )
+            }
+            Cause::Nonlinearity => {
+                let k3 = k / (span * span) * rng.random_range(0.1..0.4);
+                (Effect::Cubic(k3), format!("cubic stiffening k3 {k3:.3e}"))
+            }
+            _ => (Effect::None, "clean".into()),
         }
-        Cause::Friction => {
-            let fc = k * span * rng.random_range(0.05..0.2);
-            let fs = fc * rng.random_range(1.1..1.6);
-            let vs = wn * span * rng.random_range(0.05..0.2);
-            (
-                Effect::LuGre {
-                    fc,
-                    fs,
-                    vs,
-                    sigma0: fc / (1e-2 * span),
-                    sigma1: 2.0 * (fc / (1e-2 * span)).sqrt(),
-                    sigma2: 0.0,
-                },
-                format!("LuGre friction Fc {fc:.3e}, Fs {fs:.3e}, vs {vs:.3e}"),
-            )
-        }
-        Cause::Latency => {
-            let d = rng.random_range(2.3..12.7);
-            (
-                Effect::Delay(d),
-                format!("transport delay {:.3} s (interpolated)", d * DT_S),
-            )
-        }
-        Cause::Nonlinearity => {
-            let k3 = k / (span * span) * rng.random_range(0.1..0.4);
-            (Effect::Cubic(k3), format!("cubic stiffening k3 {k3:.3e}"))
-        }
-        _ => (Effect::None, "clean".into()),
     };
-    let y = simulate(spec.system, k, c, &u, &effect);
+    let mut effects = Vec::new();
+    let mut details = Vec::new();
+    let mut seen = Vec::new();
+    for &cause in &spec.effects {
+        if cause == Cause::None || seen.contains(&cause) {
+            continue;
+        }
+        seen.push(cause);
+        let (e, d) = draw(cause, &mut rng);
+        if !matches!(e, Effect::None) {
+            effects.push(e);
+            details.push(d);
+        }
+    }
+    let details = if details.is_empty() {
+        "clean".to_string()
+    } else {
+        details.join("; ")
+    };
+    let y = simulate(spec.system, k, c, &u, &effects);
     let diff: Vec<f64> = y.iter().zip(&clean).map(|(a, b)| a - b).collect();
+    let alone: Vec<f64> = if effects.len() > 1 {
+        effects
+            .iter()
+            .map(|e| {
+                let y1 = simulate(spec.system, k, c, &u, std::slice::from_ref(e));
+                signal::rms(
+                    &y1.iter()
+                        .zip(&clean)
+                        .map(|(a, b)| a - b)
+                        .collect::<Vec<_>>(),
+                )
+            })
+            .collect()
+    } else {
+        vec![signal::rms(&diff); effects.len()]
+    };
     // noise: 0.3-1 % of the response's spread (a good displacement sensor)
     let noise = span * rng.random_range(0.003..0.01);
     let nd = Normal::new(0.0, noise).expect("positive noise");
     let y: Vec<f64> = y.iter().map(|v| v + nd.sample(&mut rng)).collect();
     let record = Record {
         kind: Kind::Series,
-        source: format!("{:?} {} seed {}", spec.system, spec.effect, spec.seed),
+        source: format!(
+            "{:?} {} seed {}",
+            spec.system,
+            spec.effects
+                .iter()
+                .map(|c| c.name())
+                .collect::<Vec<_>>()
+                .join("+"),
+            spec.seed
+        ),
         time_s: time(n),
         segment_starts: vec![0],
         inputs: vec![Channel::new("force_n", "N", u)],
@@ -152,6 +202,7 @@ pub fn generate(spec: &DynSpec) -> DynGenerated {
     DynGenerated {
         record,
         ratio: signal::rms(&diff) / noise,
+        ratios: alone.iter().map(|r| r / noise).collect(),
         details,
     }
 }
@@ -180,28 +231,32 @@ enum Effect {
     Cubic(f64),
 }
 
-/// Semi-implicit Euler on substeps; returns the measured displacement (the last mass).
-fn simulate(system: System, k: f64, c: f64, u: &[f64], effect: &Effect) -> Vec<f64> {
+/// Semi-implicit Euler on substeps; returns the measured displacement (the last mass). The
+/// effects act together (their forces add; a delay shifts the input).
+fn simulate(system: System, k: f64, c: f64, u: &[f64], effects: &[Effect]) -> Vec<f64> {
     let n = u.len();
     let h = DT_S / SUBSTEPS as f64;
-    let input: Vec<f64> = match effect {
-        Effect::Delay(d) => (0..n)
-            .map(|i| {
-                let t = i as f64 - d;
-                if t <= 0.0 {
-                    u[0]
-                } else {
-                    let a = t.floor() as usize;
-                    let f = t - t.floor();
-                    u[a] * (1.0 - f) + u[(a + 1).min(n - 1)] * f
-                }
-            })
-            .collect(),
-        _ => u.to_vec(),
-    };
+    let mut input = u.to_vec();
+    for e in effects {
+        if let Effect::Delay(d) = *e {
+            input = (0..n)
+                .map(|i| {
+                    let t = i as f64 - d;
+                    if t <= 0.0 {
+                        u[0]
+                    } else {
+                        let a = t.floor() as usize;
+                        let f = t - t.floor();
+                        u[a] * (1.0 - f) + u[(a + 1).min(n - 1)] * f
+                    }
+                })
+                .collect();
+        }
+    }
     let (mut x1, mut v1, mut x2, mut v2) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    let mut bw = BoucWen::default();
-    let mut z = 0.0f64;
+    // one Bouc-Wen and one LuGre state per effect (unused by the others)
+    let mut bw = vec![BoucWen::default(); effects.len()];
+    let mut z = vec![0.0f64; effects.len()];
     let mut out = Vec::with_capacity(n);
     for i in 0..n {
         out.push(match system {
@@ -209,28 +264,31 @@ fn simulate(system: System, k: f64, c: f64, u: &[f64], effect: &Effect) -> Vec<f
             System::Oscillator2 => x2,
         });
         for _ in 0..SUBSTEPS {
-            // the effect acts on the first mass (where the force is applied)
-            let extra = match effect {
-                Effect::BoucWen { force, .. } => force * bw.z,
-                Effect::LuGre {
-                    fc,
-                    fs,
-                    vs,
-                    sigma0,
-                    sigma1,
-                    sigma2,
-                } => {
-                    let g = fc + (fs - fc) * (-(v1 / vs).powi(2)).exp();
-                    let dz = v1 - sigma0 * v1.abs() / g * z;
-                    let f = sigma0 * z + sigma1 * dz + sigma2 * v1;
-                    z += h * dz;
-                    // the bristle state relaxes within a substep at high stiffness
-                    z = z.clamp(-fs / sigma0, fs / sigma0);
-                    f
-                }
-                Effect::Cubic(k3) => k3 * x1.powi(3),
-                _ => 0.0,
-            };
+            // the effects act on the first mass (where the force is applied)
+            let mut extra = 0.0;
+            for (j, effect) in effects.iter().enumerate() {
+                extra += match *effect {
+                    Effect::BoucWen { force, .. } => force * bw[j].z,
+                    Effect::LuGre {
+                        fc,
+                        fs,
+                        vs,
+                        sigma0,
+                        sigma1,
+                        sigma2,
+                    } => {
+                        let g = fc + (fs - fc) * (-(v1 / vs).powi(2)).exp();
+                        let dz = v1 - sigma0 * v1.abs() / g * z[j];
+                        let f = sigma0 * z[j] + sigma1 * dz + sigma2 * v1;
+                        z[j] += h * dz;
+                        // the bristle state relaxes within a substep at high stiffness
+                        z[j] = z[j].clamp(-fs / sigma0, fs / sigma0);
+                        f
+                    }
+                    Effect::Cubic(k3) => k3 * x1.powi(3),
+                    _ => 0.0,
+                };
+            }
             let (a1, a2) = match system {
                 System::Oscillator1 => (input[i] - c * v1 - k * x1 - extra, 0.0),
                 System::Oscillator2 => (
@@ -243,8 +301,10 @@ fn simulate(system: System, k: f64, c: f64, u: &[f64], effect: &Effect) -> Vec<f
             let dx = h * v1;
             x1 += dx;
             x2 += h * v2;
-            if let Effect::BoucWen { z0, shape, .. } = effect {
-                bw.step(dx / z0, *shape);
+            for (j, effect) in effects.iter().enumerate() {
+                if let Effect::BoucWen { z0, shape, .. } = effect {
+                    bw[j].step(dx / z0, *shape);
+                }
             }
         }
     }

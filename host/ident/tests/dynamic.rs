@@ -43,7 +43,7 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
                         .map(|&(system, effect, seed)| {
                             let g = generate(&DynSpec {
                                 system,
-                                effect,
+                                effects: vec![effect],
                                 seed: seed0 + seed,
                                 rows: 2000,
                             });
@@ -81,13 +81,110 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
         }
     }
     eprintln!("dynamic battery: {correct} / {total} correct, {false_alarms} false alarms");
-    // regression bounds of the measured figures (3 seeds: 16 of 18 correct, no false alarm on
-    // 6 clean records; 10 seeds: 55 of 60, none on 20; fresh seeds 2000-2009: 50 of 60, none
-    // on 20); the 95 % is not reached, see the README
+    // regression bounds of the measured figures (10 seeds from 1000: 56 of 60, from 2000: 53
+    // of 60, from 3000: 59 of 60, no false alarm on 60 clean records); the 95 % is
+    // reached on one range of three, see the README
     assert!(total > 0);
     assert_eq!(false_alarms, 0, "{false_alarms} false alarms");
     assert!(correct * 100 >= 80 * total, "{correct} / {total}");
 }
+
+/// Two effects inside the dynamics at once. `OCM_DYN_PAIR_SEEDS` sets the seeds per pair and
+/// system (default 1, to keep CI short), `OCM_DYN_PAIR_SEED0` the first seed (default 5000). A record counts
+/// when each effect alone reaches 3x the noise; it is exact when the named causes are the two.
+#[test]
+fn dynamic_pairs_name_both_effects() {
+    let env = |k: &str, d: u64| -> u64 {
+        std::env::var(k)
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(d)
+    };
+    let seeds = env("OCM_DYN_PAIR_SEEDS", 1);
+    let seed0 = env("OCM_DYN_PAIR_SEED0", 5000);
+    let cfg = Config {
+        series_model: SeriesModel::StateSpace,
+        ..Config::default()
+    };
+    let cases: Vec<(System, [Cause; 2], u64)> = [System::Oscillator1, System::Oscillator2]
+        .into_iter()
+        .flat_map(|system| {
+            PAIRS
+                .into_iter()
+                .flat_map(move |pair| (0..seeds).map(move |s| (system, pair, seed0 + s)))
+        })
+        .collect();
+    let outcomes: Vec<(bool, bool, bool)> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..2)
+            .map(|w| {
+                let (cases, cfg) = (&cases, &cfg);
+                scope.spawn(move || {
+                    cases
+                        .iter()
+                        .skip(w)
+                        .step_by(2)
+                        .map(|(system, pair, seed)| {
+                            let g = generate(&DynSpec {
+                                system: *system,
+                                effects: pair.to_vec(),
+                                seed: *seed,
+                                rows: 2000,
+                            });
+                            let id = identify(&g.record, cfg).unwrap();
+                            let named = &id.report.causes;
+                            let counts = g.ratios.iter().all(|r| *r >= 3.0);
+                            let exact = named.len() == 2 && pair.iter().all(|c| named.contains(c));
+                            let one = pair.iter().any(|c| named.contains(c));
+                            eprintln!(
+                                "{system:?} {}+{} seed {seed}: named {named:?} ({}), ratios {:.1?}, gain {:.1} %, {}",
+                                pair[0],
+                                pair[1],
+                                if !counts {
+                                    "not counted"
+                                } else if exact {
+                                    "exact"
+                                } else {
+                                    "MISS"
+                                },
+                                g.ratios,
+                                id.report.gain_pct,
+                                g.details
+                            );
+                            (counts, exact, one)
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        workers
+            .into_iter()
+            .flat_map(|h| h.join().expect("a pair worker panicked"))
+            .collect()
+    });
+    let counted = outcomes.iter().filter(|o| o.0).count();
+    let exact = outcomes.iter().filter(|o| o.0 && o.1).count();
+    let neither = outcomes.iter().filter(|o| o.0 && !o.2).count();
+    eprintln!("dynamic pairs: {exact} / {counted} exact, {neither} with neither effect named");
+    assert!(counted > 0);
+    // every counted record names at least one of its two effects
+    assert_eq!(neither, 0, "{neither} records name neither effect");
+    assert!(
+        exact * 100 >= PAIR_FLOOR_PCT * counted,
+        "{exact} / {counted}"
+    );
+}
+
+/// The pairs of the dynamic battery.
+const PAIRS: [[Cause; 2]; 3] = [
+    [Cause::Hysteresis, Cause::Nonlinearity],
+    [Cause::Friction, Cause::Nonlinearity],
+    [Cause::Hysteresis, Cause::Friction],
+];
+
+/// Regression floor of the exact-pair share, percent: measured 2 of 6 with one seed (seed
+/// 5000) and 6 of 12 with two (`OCM_DYN_PAIR_SEEDS=2`: one mass 5 of 6, two masses 1 of 6);
+/// the 80 % is not reached, see the README.
+const PAIR_FLOOR_PCT: usize = 33;
 
 /// The speed figure of a 100k-row dynamic record (no assertion on time: run it with
 /// `--ignored --nocapture` and read the figure; the identification itself must still work).
@@ -96,7 +193,7 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
 fn dynamic_100k_record_figure() {
     let g = generate(&DynSpec {
         system: System::Oscillator1,
-        effect: Cause::Friction,
+        effects: vec![Cause::Friction],
         seed: 7,
         rows: 100_000,
     });

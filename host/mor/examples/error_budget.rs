@@ -5,9 +5,15 @@
 //! `cargo run --release -p ocm-mor --example error_budget -- DIR ranks tols every [galerkin 0|1]`
 //! with DIR snapshots of `ocm mor snapshots` (or of the `figures` example). Environment:
 //! MOR_RTOL (reduced Newton tolerance), MOR_AGE (damping tangent age), MOR_CA (extrapolating
-//! predictor), MOR_STATIC (static pressure cases: full vs projected vs Galerkin, plate rigidity),
-//! MOR_ENERGY (strain energy of projected held-out states), MOR_WEIGHT=k (stiffness-weighted POD
-//! of every k-th training snapshot instead of the Euclidean one).
+//! predictor), MOR_STATIC (static pressure cases: full vs projected vs Galerkin, plate rigidity,
+//! the Galerkin residual at the projected solution split into the rigid plate's constraint forces
+//! and the rest, and the Galerkin statics with the plate's constraint forces removed), MOR_ENERGY
+//! (strain energy of projected held-out states), MOR_WEIGHT=k (stiffness-weighted POD of every
+//! k-th training snapshot instead of the Euclidean one), MOR_SERIES=PREFIX (per-step TCP error,
+//! TCP speed and inputs to PREFIX-rank-model-tol.csv), MOR_BETA=b (Rayleigh stiffness damping b
+//! for the held-out runs of both models; the full held-out runs are re-simulated), MOR_SUBSTEPS
+//! (lists the held-out full steps the solver cut). Every run also prints the held-out TCP RMSE
+//! in three bands of the full model's TCP speed.
 use nalgebra::{DMatrix, DVector};
 use ocm_fem::bellows::{Bellows, BellowsConfig};
 use ocm_mor::curve::projected_tcp_rmse_mm;
@@ -41,13 +47,44 @@ fn main() -> ocm_mor::Result<()> {
     let galerkin = a.get(4).is_some_and(|s| s == "1");
     let path = ocm_datadir::data_file(None, "bellows-manipulator/ManipulatorWhole25.vtk")
         .map_err(|e| ocm_mor::MorError::Invalid(e.to_string()))?;
-    let b = Bellows::load(path, BellowsConfig::default())?;
+    let b = Bellows::load(&path, BellowsConfig::default())?;
     let s = store::load_snapshots(&dir, &store::model_hash(&b))?;
+    // MOR_BETA: another Rayleigh stiffness damping for the held-out runs of both models (the
+    // basis stays the one of the snapshots): is the transient error the damping's?
+    let beta: Option<f64> = std::env::var("MOR_BETA").ok().and_then(|v| v.parse().ok());
+    let b = match beta {
+        Some(beta) => Bellows::load(
+            &path,
+            BellowsConfig {
+                rayleigh_beta: beta,
+                ..BellowsConfig::default()
+            },
+        )?,
+        None => b,
+    };
     let drive = DriveConfig {
         dt_s: s.rec.dt_s,
         ..DriveConfig::default()
     };
-    let held = s.held_out(&drive);
+    let mut held = s.held_out(&drive);
+    if std::env::var("MOR_SUBSTEPS").is_ok() {
+        for (k, inputs, _) in &held {
+            let tr = ocm_mor::full::simulate(&b, inputs, drive.dt_s, false, |_| {})?;
+            let cut: Vec<(usize, usize)> = tr
+                .substeps
+                .iter()
+                .enumerate()
+                .filter(|(_, n)| **n > 1)
+                .map(|(j, n)| (j, *n))
+                .collect();
+            eprintln!("held-out sequence {k}: full steps cut (step, sub-steps): {cut:?}");
+        }
+    }
+    if beta.is_some() {
+        for (_, inputs, xs) in &mut held {
+            *xs = ocm_mor::full::simulate(&b, inputs, drive.dt_s, false, |_| {})?.xs;
+        }
+    }
     let n = s.disp.cols;
     let maxr = ranks.iter().copied().max().unwrap_or(1);
     let train = s.matrix(0, s.train_rows());
@@ -138,7 +175,9 @@ fn main() -> ocm_mor::Result<()> {
                 [10.0, 10.0, 10.0],
                 [35.0, 35.0, 0.0],
             ] {
-                let (st, _) = b.solve_kpa(&mut solver, &p)?;
+                let Ok((st, _)) = b.solve_kpa(&mut solver, &p) else {
+                    continue;
+                };
                 let xf = probe.of_full_state(&st);
                 let u: Vec<f64> = (0..n)
                     .map(|d| st.x[d] - b.model.rest[d / 3][d % 3])
@@ -149,8 +188,72 @@ fn main() -> ocm_mor::Result<()> {
                     pressure_kpa: p,
                     tip_force_n: [0.0; 3],
                 };
-                let qg = gal.solve_static(&inp, 4)?;
+                let qg = match gal.solve_static(&inp, 8) {
+                    Ok(q) => q,
+                    Err(e) => {
+                        eprintln!("  static {p:?}: reduced statics failed: {e}");
+                        continue;
+                    }
+                };
                 let xg = rp.compact_state(&qg, &DVector::zeros(r));
+                // Split the Galerkin residual at the projected solution: the full solution's own
+                // nodal residual (non-zero only where the rigid plate's constraint forces act)
+                // seen through V, and the rest (the projection error of the deformable part).
+                // One Newton step from q_p against each part shows which one moves q_g.
+                let pat = ocm_fem::model::Pattern::new(&b.model)?;
+                let ev = b
+                    .model
+                    .evaluate(&pat, &st.x, &b.loads_kpa(&p), 1.0, false)?;
+                let net: Vec<f64> = ev.f_int.iter().zip(&ev.f_ext).map(|(a, c)| a - c).collect();
+                let rc = v.transpose() * DVector::from_column_slice(&net);
+                let (res, kt) = gal.static_residual(&qp, &inp)?;
+                let lu = kt.lu();
+                let step = |rhs: &DVector<f64>| &qp - lu.solve(rhs).unwrap_or_else(|| rhs * 0.0);
+                let (qc, qr, qn) = (step(&rc), step(&(&res - &rc)), step(&res));
+                let e = |q: &DVector<f64>| {
+                    let x = rp.compact_state(q, &DVector::zeros(r));
+                    ((x[0] - xf[0]).powi(2) + (x[1] - xf[1]).powi(2) + (x[2] - xf[2]).powi(2))
+                        .sqrt()
+                        * 1e3
+                };
+                // The Galerkin statics with the plate's constraint forces of the full solution
+                // added as a constant load: what the reduced model would give if the plate's
+                // constraint forces did no virtual work on V (Newton from q_p).
+                let mut qk = qp.clone();
+                for _ in 0..30 {
+                    let (res, kt) = gal.static_residual(&qk, &inp)?;
+                    let d = kt
+                        .lu()
+                        .solve(&(res - &rc))
+                        .unwrap_or_else(|| qk.clone() * 0.0);
+                    qk -= &d;
+                    if d.norm() < 1e-12 * qk.norm() {
+                        break;
+                    }
+                }
+                eprintln!(
+                    "  galerkin with the plate's constraint forces removed: TCP err {:.3} mm",
+                    e(&qk)
+                );
+                let on_plate: f64 = (0..n)
+                    .filter(|d| b.top_frame.contains(&(d / 3)))
+                    .map(|d| net[d].powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                let free_nodes: f64 = (0..n)
+                    .filter(|d| !b.model.fixed[*d] && !b.top_frame.contains(&(d / 3)))
+                    .map(|d| net[d].powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                eprintln!(
+                    "  residual split {p:?}: |net| plate {on_plate:.3e} N, free {free_nodes:.3e} N; |V^T net| {:.3e}, |R(q_p)| {:.3e}, rest {:.3e}; one Newton step from q_p: plate part only -> TCP err {:.3} mm, projection part only -> {:.3} mm, both -> {:.3} mm",
+                    rc.norm(),
+                    res.norm(),
+                    (&res - &rc).norm(),
+                    e(&qc),
+                    e(&qr),
+                    e(&qn),
+                );
                 let nonrigid = |q: &DVector<f64>| -> f64 {
                     let uu = &v * q;
                     let pos = |i: usize| {
@@ -198,10 +301,10 @@ fn main() -> ocm_mor::Result<()> {
         let tq = s.training_q(&v, every);
         let mut models = vec![];
         if galerkin {
-            models.push((0.0, gal.clone()));
+            models.push((0.0, gal.clone(), "galerkin"));
         }
         for &t in &tols {
-            models.push((t, gal.hyper_reduce(&tq, t)?.model));
+            models.push((t, gal.hyper_reduce(&tq, t)?.model, "ecsw"));
         }
         let age: usize = std::env::var("MOR_AGE")
             .ok()
@@ -211,7 +314,7 @@ fn main() -> ocm_mor::Result<()> {
             .ok()
             .and_then(|s| s.parse().ok())
             .unwrap_or(ocm_mor::rom::DEFAULT_RTOL);
-        for (t, rom) in &mut models {
+        for (t, rom, label) in &mut models {
             rom.damping_tangent_age = age;
             rom.rtol = rtol;
             if std::env::var("MOR_CA").is_ok() {
@@ -219,8 +322,32 @@ fn main() -> ocm_mor::Result<()> {
             }
             let (mut sq, mut cnt, mut times, mut its) = (0.0, 0usize, vec![], 0usize);
             let (mut nr, mut nf) = (0.0, 0.0);
-            for (_, inputs, xs_full) in &held {
+            let mut series = String::new();
+            // Squared TCP error and count per band of the full model's TCP speed: is the error
+            // in the holds or in the transients after input steps?
+            const BANDS_MM_S: [f64; 3] = [30.0, 300.0, f64::INFINITY];
+            let mut bands = [(0.0, 0usize); 3];
+            for (k, inputs, xs_full) in &held {
                 let run = simulate_reduced(rom, &rp, inputs, drive.dt_s)?;
+                for (j, (x, y)) in run.xs.iter().zip(xs_full).enumerate() {
+                    let e = (0..3).map(|d| (x[d] - y[d]).powi(2)).sum::<f64>().sqrt();
+                    let speed = (8..11).map(|d| y[d].powi(2)).sum::<f64>().sqrt();
+                    let band = BANDS_MM_S
+                        .iter()
+                        .position(|&b| speed * 1e3 < b)
+                        .unwrap_or(2);
+                    bands[band].0 += e * e;
+                    bands[band].1 += 1;
+                    if std::env::var("MOR_SERIES").is_ok() {
+                        series.push_str(&format!(
+                            "{k},{j},{:.4},{:.4},{:?},{:?}\n",
+                            e * 1e3,
+                            speed * 1e3,
+                            inputs[j].pressure_kpa,
+                            inputs[j].tip_force_n
+                        ));
+                    }
+                }
                 for (x, y) in run.xs.iter().zip(xs_full) {
                     nr += (x[0] - tcp0[0]).powi(2)
                         + (x[1] - tcp0[1]).powi(2)
@@ -235,9 +362,13 @@ fn main() -> ocm_mor::Result<()> {
                 times.extend(run.step_seconds);
                 its += run.report.iterations;
             }
+            if let Ok(path) = std::env::var("MOR_SERIES") {
+                let p = format!("{path}-{r}-{label}-{t:e}.csv");
+                std::fs::write(&p, &series).map_err(|e| ocm_mor::MorError::io(p.as_ref(), e))?;
+            }
             println!(
                 "{r},{},{t:e},{},{:.4},{:.4},{:.3}",
-                if *t == 0.0 { "galerkin" } else { "ecsw" },
+                label,
                 rom.elements.len(),
                 (sq / cnt as f64).sqrt(),
                 median(&times) * 1e3,
@@ -247,6 +378,16 @@ fn main() -> ocm_mor::Result<()> {
                 "  rms TCP motion reduced {:.3} mm, full {:.3} mm",
                 (nr / cnt as f64).sqrt() * 1e3,
                 (nf / cnt as f64).sqrt() * 1e3
+            );
+            let band = |i: usize| (bands[i].0 / bands[i].1.max(1) as f64).sqrt() * 1e3;
+            eprintln!(
+                "  TCP RMSE by full TCP speed: < 30 mm/s {:.3} mm ({} steps), 30-300 {:.3} mm ({}), > 300 {:.3} mm ({})",
+                band(0),
+                bands[0].1,
+                band(1),
+                bands[1].1,
+                band(2),
+                bands[2].1
             );
         }
     }

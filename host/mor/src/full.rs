@@ -7,7 +7,7 @@ use crate::{MorError, Result};
 use nalgebra::Vector3;
 use ocm_fem::bellows::{Bellows, check_pressures};
 use ocm_fem::model::{Model, State};
-use ocm_fem::solve::dynamics::{DynamicSolver, Integrator};
+use ocm_fem::solve::dynamics::{DynamicSolver, Integrator, StepReport};
 
 /// Distributes a tip force over the top-face nodes in equal parts (a dead load on the top plate).
 pub fn tip_point_forces(top_face: &[usize], force_n: [f64; 3]) -> Vec<(usize, Vector3<f64>)> {
@@ -38,17 +38,15 @@ impl<'a> FullSim<'a> {
         })
     }
 
-    /// Advances one step of `dt_s` under `input` (held over the step).
-    pub fn step(&mut self, input: &Input, dt_s: f64) -> Result<()> {
+    /// Advances one step of `dt_s` under `input` (held over the step); returns the solver's
+    /// report (Newton iterations, sub-steps when the step was cut).
+    pub fn step(&mut self, input: &Input, dt_s: f64) -> Result<StepReport> {
         check_pressures(&input.pressure_kpa)?;
         self.model.point_forces = tip_point_forces(&self.bellows.top_face, input.tip_force_n);
         let loads = self.bellows.loads_kpa(&input.pressure_kpa);
         self.solver
             .step(&self.model, &mut self.state, &loads, dt_s)
-            .map_err(|e| {
-                MorError::Solve(format!("full model at t = {:.3} s: {e}", self.state.t))
-            })?;
-        Ok(())
+            .map_err(|e| MorError::Solve(format!("full model at t = {:.3} s: {e}", self.state.t)))
     }
 
     /// Nodal displacements x - X, flat (3N), m.
@@ -73,6 +71,8 @@ pub struct Trajectory {
     pub seconds: f64,
     /// Wall time of each step, s.
     pub step_seconds: Vec<f64>,
+    /// Sub-steps of each step (1 unless the solver cut it).
+    pub substeps: Vec<usize>,
 }
 
 /// Runs the full model over `inputs` from rest.
@@ -90,11 +90,13 @@ pub fn simulate(
         xs: Vec::with_capacity(inputs.len()),
         seconds: 0.0,
         step_seconds: Vec::with_capacity(inputs.len()),
+        substeps: Vec::with_capacity(inputs.len()),
     };
     for (k, inp) in inputs.iter().enumerate() {
         let t0 = std::time::Instant::now();
-        sim.step(inp, dt_s)?;
+        let rep = sim.step(inp, dt_s)?;
         let dt = t0.elapsed().as_secs_f64();
+        out.substeps.push(rep.substeps);
         out.seconds += dt;
         out.step_seconds.push(dt);
         if keep_displacements {

@@ -9,7 +9,7 @@ use ocm_learn::gcn::{Graph, GraphTensors};
 use ocm_learn::{Checkpoint, CheckpointInfo, cpu, save_checkpoint, values};
 use serde::{Deserialize, Serialize};
 
-use crate::data::NodeLocator;
+use crate::data::{NodeLocator, contact_gate};
 use crate::kernel::Kernel;
 use crate::model::{ARCHITECTURE, Inputs, NpeConfig, NpeNet};
 use crate::{NpeError, Result};
@@ -201,6 +201,9 @@ impl Npe {
         }
         self.locator
             .node_depth(&admitted, self.config.scales.z_m, &mut x.node_depth);
+        if self.config.contact_prior {
+            contact_gate(&x.node_depth, &self.surface.edges, &mut x.node_gate);
+        }
         x.counts.push(kept);
         x.scalars
             .push((force_n / self.config.scales.force_n) as f32);

@@ -34,6 +34,9 @@ pub struct SampleScore {
     pub force_pred_n: f64,
     /// The FEM's, N.
     pub force_fem_n: f64,
+    /// Part of `force_pred_n` from the nodes the FEM puts no contact force on, N: a small
+    /// per-node offset that the nodal-force error hardly sees adds up here over the whole face.
+    pub force_off_contact_n: f64,
 }
 
 /// Summary over a set of samples.
@@ -53,6 +56,9 @@ pub struct Scores {
     pub orientation_samples: usize,
     /// RMSE of the total normal force, N.
     pub force_rmse_n: f64,
+    /// Root mean square of the force from nodes without FEM contact force, N.
+    #[serde(default)]
+    pub force_off_contact_rms_n: f64,
 }
 
 fn mean_std(v: &[f64]) -> [f64; 2] {
@@ -117,6 +123,13 @@ pub fn evaluate(
                 .collect();
             let pred: Fields = npe.unscale(&mine);
             let sc = npe.config.scales.displacement_m;
+            let off: f64 = pred
+                .nodal_force_n
+                .iter()
+                .zip(s.target.chunks(6))
+                .filter(|(_, t)| t[3..6].iter().all(|&v| v == 0.0))
+                .map(|(f, _)| -f[2])
+                .sum();
             let truth: Vec<[f64; 3]> = s
                 .target
                 .chunks(6)
@@ -146,6 +159,7 @@ pub fn evaluate(
                 orientation_deg: orientation,
                 force_pred_n: pred.total_force_n()[2],
                 force_fem_n: s.force_n[2],
+                force_off_contact_n: off,
             });
         }
     }
@@ -166,6 +180,12 @@ pub fn evaluate(
             orientation_deg: mean_std(&or),
             orientation_samples: or.len(),
             force_rmse_n: fr.sqrt(),
+            force_off_contact_rms_n: (per
+                .iter()
+                .map(|s| s.force_off_contact_n.powi(2))
+                .sum::<f64>()
+                / per.len().max(1) as f64)
+                .sqrt(),
         },
         per,
     ))

@@ -38,6 +38,9 @@ pub struct FitOptions {
     /// Weight of the resultant-force term of the loss ([`NpeConfig::lambda_total`]).
     #[serde(default)]
     pub lambda_total: f64,
+    /// The contact prior on the readout ([`NpeConfig::contact_prior`]).
+    #[serde(default)]
+    pub contact_prior: bool,
     /// Show a progress bar.
     pub progress: bool,
 }
@@ -57,6 +60,7 @@ impl Default for FitOptions {
             width: 32,
             layers: 6,
             lambda_total: 0.0,
+            contact_prior: false,
             progress: false,
         }
     }
@@ -132,6 +136,7 @@ pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
     cfg.width = opts.width;
     cfg.layers = opts.layers;
     cfg.lambda_total = opts.lambda_total;
+    cfg.contact_prior = opts.contact_prior;
     let surface = Surface {
         rest_m: p.rest_m.clone(),
         edges: p.edges.clone(),

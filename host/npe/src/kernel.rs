@@ -7,7 +7,7 @@
 use ocm_learn::gcn::Graph;
 use ocm_learn::infer::{DenseDeepSets, DenseGcn, DenseMlp};
 
-use crate::model::{Inputs, NpeConfig, NpeNet};
+use crate::model::{Inputs, NpeConfig, NpeNet, prior_row};
 
 /// The network of one engine as plain layers.
 #[derive(Debug, Clone)]
@@ -21,6 +21,8 @@ pub struct Kernel {
     use_geometry: bool,
     use_force: bool,
     geometry_features: usize,
+    /// Scaled-penetration-to-displacement factor when the readout carries the contact prior.
+    prior: Option<f32>,
 }
 
 impl Kernel {
@@ -36,6 +38,7 @@ impl Kernel {
             use_geometry: cfg.use_geometry,
             use_force: cfg.use_force,
             geometry_features: cfg.geometry_features,
+            prior: cfg.contact_prior.then(|| cfg.depth_to_displacement()),
         }
     }
 
@@ -71,6 +74,17 @@ impl Kernel {
         }
         debug_assert_eq!(h.len(), n * width);
         self.gcn.forward(&mut h, 1);
-        (self.readout.forward_rows(&h, n), hg)
+        let mut out = self.readout.forward_rows(&h, n);
+        if let (Some(k), Some(d)) = (self.prior, depth)
+            && x.node_gate.len() >= n
+        {
+            for (v, row) in out.chunks_mut(6).enumerate() {
+                let (mul, add) = prior_row(d[v], x.node_gate[v], k);
+                for c in 0..6 {
+                    row[c] = row[c] * mul[c] + add[c];
+                }
+            }
+        }
+        (out, hg)
     }
 }

@@ -82,10 +82,20 @@ pub struct NpeConfig {
     /// the stored configuration when zero, so those checkpoints still load.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub lambda_total: f64,
+    /// The contact prior on the readout: the nodal force is zero outside the nodes the body
+    /// penetrates (and their neighbours), and the vertical displacement is read out as a
+    /// correction to minus the node's own penetration. False in checkpoints written before it
+    /// existed (then not stored, so those still load).
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub contact_prior: bool,
 }
 
 fn is_zero(v: &f64) -> bool {
     *v == 0.0
+}
+
+fn is_false(v: &bool) -> bool {
+    !*v
 }
 
 impl NpeConfig {
@@ -114,6 +124,7 @@ impl NpeConfig {
             },
             lambda: 1.0,
             lambda_total: 0.0,
+            contact_prior: false,
         }
     }
 
@@ -121,6 +132,11 @@ impl NpeConfig {
     /// the cell area in units of 10 mm^2).
     pub fn grid_spacing_m(&self) -> f64 {
         (self.set_scale * 10.0 * 1e-6).sqrt()
+    }
+
+    /// Factor from the scaled penetration input to the scaled displacement target.
+    pub fn depth_to_displacement(&self) -> f32 {
+        (self.scales.z_m / self.scales.displacement_m) as f32
     }
 
     /// Width of h_global.
@@ -135,6 +151,11 @@ impl NpeConfig {
                 "NPE width {} must exceed 4 and layers {} be positive",
                 self.width, self.layers
             )));
+        }
+        if self.contact_prior && !self.use_geometry {
+            return Err(NpeError::Input(
+                "the contact prior needs the contact points (geometry input)".into(),
+            ));
         }
         let encoder = DeepSetsConfig {
             phi: MlpConfig::relu(3, &[self.point_hidden], self.point_features),
@@ -177,6 +198,20 @@ pub struct Inputs {
     /// Scaled penetration of each node by the contact points nearest to it, sample after
     /// sample (`nodes` per sample; 0 where no point is nearest).
     pub node_depth: Vec<f32>,
+    /// Contact gate of each node, sample after sample: 1 where the node or a neighbour is
+    /// penetrated, else 0 (filled only for an engine with the contact prior).
+    pub node_gate: Vec<f32>,
+}
+
+/// Multiplier and offset that apply the contact prior to a scaled readout row
+/// `(u_x, u_y, u_z, f_x, f_y, f_z)`: `out * mul + add`. `depth` is the node's scaled
+/// penetration, `gate` its contact gate; `depth_to_u` converts the penetration's scale to the
+/// displacement's.
+pub fn prior_row(depth: f32, gate: f32, depth_to_u: f32) -> ([f32; 6], [f32; 6]) {
+    (
+        [1.0, 1.0, 1.0, gate, gate, gate],
+        [0.0, 0.0, -depth * depth_to_u, 0.0, 0.0, 0.0],
+    )
 }
 
 /// The network.
@@ -245,6 +280,22 @@ impl NpeNet {
             2,
         );
         let h = self.gcn.forward(h0, graph);
-        (self.readout.forward(h), hg)
+        let out = self.readout.forward(h);
+        if !cfg.contact_prior || x.node_depth.len() != b * n || x.node_gate.len() != b * n {
+            return (out, hg);
+        }
+        let k = cfg.depth_to_displacement();
+        let (mut mul, mut add) = (vec![0.0; n * b * 6], vec![0.0; n * b * 6]);
+        for v in 0..n {
+            for j in 0..b {
+                let (m, a) = prior_row(x.node_depth[j * n + v], x.node_gate[j * n + v], k);
+                let at = (v * b + j) * 6;
+                mul[at..at + 6].copy_from_slice(&m);
+                add[at..at + 6].copy_from_slice(&a);
+            }
+        }
+        let mul = Tensor::<3>::from_data(TensorData::new(mul, [n, b, 6]), device);
+        let add = Tensor::<3>::from_data(TensorData::new(add, [n, b, 6]), device);
+        (out * mul + add, hg)
     }
 }

@@ -25,6 +25,9 @@ pub enum PegError {
     /// The neural physics engine refused an input or a checkpoint.
     #[error(transparent)]
     Npe(#[from] ocm_npe::NpeError),
+    /// The tactile renderer or the gel mesh refused something.
+    #[error(transparent)]
+    Tactile(#[from] ocm_tactile::TactileError),
 }
 
 /// Result with [`PegError`].

@@ -9,6 +9,7 @@ pub mod encoder;
 pub mod error;
 pub mod eval;
 pub mod expert;
+pub mod images;
 pub mod npe_encoder;
 pub mod patch;
 pub mod replay;

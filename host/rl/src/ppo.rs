@@ -73,6 +73,11 @@ pub struct PpoConfig {
     /// that a warm-started policy is not pushed around by an untrained critic.
     #[serde(default)]
     pub critic_warmup: usize,
+    /// Weight of the squared distance of the policy mean to the initial policy's mean in the
+    /// actor loss (with `init_from`: a KL anchor to the start, since the Gaussians share their
+    /// standard deviation; 0: none).
+    #[serde(default)]
+    pub bc_weight: f64,
 }
 
 impl Default for PpoConfig {
@@ -96,6 +101,7 @@ impl Default for PpoConfig {
             eval_episodes: 2,
             init_from: None,
             critic_warmup: 0,
+            bc_weight: 0.0,
         }
     }
 }
@@ -190,6 +196,12 @@ pub fn train(
             "PPO needs iterations, envs, horizon and minibatch >= 1".into(),
         ));
     }
+    if !(cfg.bc_weight >= 0.0 && cfg.bc_weight.is_finite()) {
+        return Err(RlError::Invalid(format!(
+            "PPO bc_weight {} must be finite and >= 0",
+            cfg.bc_weight
+        )));
+    }
     let device = ocm_learn::cpu_autodiff();
     let pcfg = policy_config(&cfg.hidden);
     let vcfg = MlpConfig {
@@ -202,6 +214,7 @@ pub fn train(
         Some(path) => load_actor(path, &pcfg, &device, cfg.seed)?,
         None => pcfg.init(&device, cfg.seed),
     };
+    let anchor = (cfg.bc_weight > 0.0).then(|| actor.valid());
     let mut critic = vcfg.init(&device, cfg.seed ^ 0x0c41_71c0);
     let mut opt_a = AdamConfig::new().init();
     let mut opt_c = AdamConfig::new().init();
@@ -313,6 +326,13 @@ pub fn train(
             .collect();
         let obs32: Vec<f32> = b_obs.iter().map(|&v| v as f32).collect();
         let act32: Vec<f32> = b_act.iter().map(|&v| v as f32).collect();
+        let anchor32: Vec<f32> = match &anchor {
+            Some(m) => forward_rows(m, &b_obs, OBS_DIM)
+                .into_iter()
+                .map(|v| v as f32)
+                .collect(),
+            None => vec![],
+        };
         let mut order: Vec<usize> = (0..n * t_len).collect();
         let inv2s2 = 0.5 / (std * std);
         for _ in 0..cfg.epochs {
@@ -326,14 +346,24 @@ pub fn train(
                 let ad = ocm_learn::tensor2(mb.iter().map(|&j| adv_n[j]).collect(), m, 1, &device);
                 let rt =
                     ocm_learn::tensor2(mb.iter().map(|&j| ret[j] as f32).collect(), m, 1, &device);
-                let d: Tensor<2> = actor.forward(x.clone()) - a;
+                let mu: Tensor<2> = actor.forward(x.clone());
+                let d = mu.clone() - a;
                 // log N(a; mu, std) up to the constant the old log-probability shares.
                 let logp = (d.clone() * d).sum_dim(1).mul_scalar(-inv2s2 as f32);
                 let ratio = (logp - old).exp();
                 let s1 = ratio.clone() * ad.clone();
                 let s2 = ratio.clamp(1.0 - cfg.clip as f32, 1.0 + cfg.clip as f32) * ad;
                 if it > cfg.critic_warmup {
-                    let loss_a = s1.min_pair(s2).mean().neg();
+                    let mut loss_a = s1.min_pair(s2).mean().neg();
+                    if anchor.is_some() {
+                        let start = ocm_learn::gather_rows(&anchor32, ACT_DIM, mb, &device);
+                        let da = mu - start;
+                        loss_a = loss_a
+                            + (da.clone() * da)
+                                .sum_dim(1)
+                                .mean()
+                                .mul_scalar(cfg.bc_weight as f32);
+                    }
                     let grads = GradientsParams::from_grads(loss_a.backward(), &actor);
                     actor = opt_a.step(cfg.learning_rate, actor, grads);
                 }

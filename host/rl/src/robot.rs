@@ -269,6 +269,36 @@ impl Robot {
         q
     }
 
+    /// TCP (m) of the static equilibrium under the normalised action `a` and the force `f_n`.
+    pub fn static_tcp(&self, a: &[f64; 3], f_n: &Vector3<f64>) -> Vector3<f64> {
+        self.chain
+            .tcp(&self.equilibrium(&self.command_of_action(a), f_n))
+    }
+
+    /// d(static TCP)/d(action) at `a` under the force `f_n` (m per action unit), by one-sided
+    /// differences pointing into the action box.
+    pub fn action_jacobian(&self, a: &[f64; 3], f_n: &Vector3<f64>) -> Matrix3<f64> {
+        self.action_jacobian_at(a, f_n, &self.static_tcp(a, f_n))
+    }
+
+    /// [`Robot::action_jacobian`] given the static TCP at `a`.
+    fn action_jacobian_at(
+        &self,
+        a: &[f64; 3],
+        f_n: &Vector3<f64>,
+        tcp_a: &Vector3<f64>,
+    ) -> Matrix3<f64> {
+        let h = 1e-5;
+        let mut jac = Matrix3::zeros();
+        for k in 0..3 {
+            let mut b = *a;
+            let step = if a[k] + h > 1.0 { -h } else { h };
+            b[k] += step;
+            jac.set_column(k, &((self.static_tcp(&b, f_n) - tcp_a) / step));
+        }
+        jac
+    }
+
     /// The expert of eq 4.31: the normalised action whose static equilibrium under the force
     /// `f_n` puts the TCP at `target_m`, by damped Gauss-Newton from `start` (clamped to the
     /// action box). Returns the action and the remaining TCP distance, m.
@@ -278,10 +308,7 @@ impl Robot {
         f_n: &Vector3<f64>,
         start: &[f64; 3],
     ) -> ([f64; 3], f64) {
-        let tcp_of = |a: &[f64; 3]| {
-            let q = self.equilibrium(&self.command_of_action(a), f_n);
-            self.chain.tcp(&q)
-        };
+        let tcp_of = |a: &[f64; 3]| self.static_tcp(a, f_n);
         let mut a = start.map(|v| {
             if v.is_finite() {
                 v.clamp(-1.0, 1.0)
@@ -294,15 +321,7 @@ impl Robot {
             if r.norm() < 1e-7 {
                 break;
             }
-            let h = 1e-5;
-            let mut jac = Matrix3::zeros();
-            for k in 0..3 {
-                let mut b = a;
-                // One-sided differences pointing into the box.
-                let step = if a[k] + h > 1.0 { -h } else { h };
-                b[k] += step;
-                jac.set_column(k, &((tcp_of(&b) - target_m - r) / step));
-            }
+            let jac = self.action_jacobian_at(&a, f_n, &(r + target_m));
             let jt = jac.transpose();
             let lhs = jt * jac + Matrix3::identity() * 1e-10;
             let Some(delta) = lhs.lu().solve(&(-jt * r)) else {

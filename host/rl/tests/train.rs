@@ -217,3 +217,65 @@ fn ppo_and_sac_start_from_a_saved_policy() {
     assert!(gap < 0.2 * spread, "{gap} vs {spread}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// PPO's `bc_weight` anchors the policy mean to its start: after the same updates the anchored
+/// policy stays much closer to the initial network than the free one; a NaN weight is refused.
+#[test]
+fn ppo_bc_weight_anchors_the_policy_to_its_start() {
+    let r = robot();
+    let cfg = EnvConfig::new(TaskKind::Circle);
+    let base = PpoConfig {
+        iterations: 3,
+        envs: 2,
+        horizon: 32,
+        epochs: 4,
+        minibatch: 16,
+        hidden: vec![16],
+        eval_every: 3,
+        eval_episodes: 1,
+        learning_rate: 3e-3,
+        ..PpoConfig::default()
+    };
+    // A zero step size leaves the initial network.
+    let (start, _) = ppo::train(
+        &r,
+        &cfg,
+        &PpoConfig {
+            learning_rate: 0.0,
+            ..base.clone()
+        },
+        |_| {},
+    )
+    .unwrap();
+    let demos = bc::collect(&r, &cfg, 2, 0.03, 0, 2).unwrap();
+    let obs: Vec<f64> = demos.obs[..40 * 100]
+        .iter()
+        .map(|&v| f64::from(v))
+        .collect();
+    let a0 = start.act_batch(&obs).unwrap();
+    let drift = |w: f64| {
+        let (p, _) = ppo::train(
+            &r,
+            &cfg,
+            &PpoConfig {
+                bc_weight: w,
+                ..base.clone()
+            },
+            |_| {},
+        )
+        .unwrap();
+        let a = p.act_batch(&obs).unwrap();
+        a.iter().zip(&a0).map(|(x, y)| (x - y).abs()).sum::<f64>() / a.len() as f64
+    };
+    let (free, anchored) = (drift(0.0), drift(1e3));
+    eprintln!("mean |a - a_start|: free {free:.4}, anchored {anchored:.4}");
+    assert!(
+        free > 1e-3 && anchored < 0.3 * free,
+        "free {free}, anchored {anchored}"
+    );
+    let bad = PpoConfig {
+        bc_weight: f64::NAN,
+        ..base
+    };
+    assert!(ppo::train(&r, &cfg, &bad, |_| {}).is_err());
+}

@@ -11,8 +11,8 @@ use ocm_rl::eval::evaluate;
 use ocm_rl::robot::Load;
 use ocm_rl::tasks::{ContactConfig, Episode, FIGURE_EIGHT_BALL_RADIUS_M, POINTS, TaskKind};
 use ocm_rl::transfer::{
-    CommandMap, Disconnect, Plant, RomPlant, SurrogatePlant, TransferConfig, evaluate_on_plant,
-    expert_actor,
+    Admittance, CommandMap, Disconnect, Plant, RomPlant, SurrogatePlant, TransferConfig,
+    evaluate_on_plant, expert_actor,
 };
 use ocm_surrogate::chain::{GROUPS, Posture};
 use ocm_surrogate::constraints::Limits;
@@ -312,4 +312,85 @@ fn reduced_plant_settles_at_the_reduced_statics() {
         "{} m",
         (pc - balanced).norm()
     );
+}
+
+/// The plant's f_SP extends each of the three prismatic joints 1 mm farther than the inverse
+/// map the deployment commands with (a model gap of 3 mm along the pressing direction).
+#[derive(Debug)]
+struct LongerPlant {
+    map: LinearMap,
+    extra_m: f64,
+}
+
+impl CommandMap for LongerPlant {
+    fn pressures(&self, q: &Posture) -> ocm_rl::Result<[f64; 3]> {
+        self.map.pressures(q)
+    }
+    fn posture(&self, p: &[f64; 3]) -> ocm_rl::Result<Posture> {
+        let mut q = self.map.posture(p)?;
+        for &j in GROUPS[2].iter() {
+            q[j] += self.extra_m;
+        }
+        Ok(self.map.limits.project(&q)?)
+    }
+}
+
+/// Force control through a plant with a model gap: open loop, the 5000 N/m contact turns the
+/// gap into newtons of force error; with the admittance layer the measured force closes the
+/// loop and the error falls below a fifth of that (the layer's offset is about the gap).
+#[test]
+fn the_admittance_layer_closes_the_force_loop_across_a_model_gap() {
+    let r = robot();
+    let map = LinearMap {
+        limits: *r.limits(),
+    };
+    let gap = LongerPlant {
+        map: LinearMap {
+            limits: *r.limits(),
+        },
+        extra_m: 0.001,
+    };
+    let contact = ContactConfig::default();
+    let episode = |s: u64| Episode::new(TaskKind::Force, &r.rest_tcp(), &contact, s);
+    let mut plant = SurrogatePlant::new(r.clone(), &gap).unwrap();
+    let open = TransferConfig::default();
+    let closed = TransferConfig {
+        admittance: Some(Admittance::default()),
+        ..open
+    };
+    let mut expert = expert_actor(&r);
+    let a = evaluate_on_plant(&mut plant, &map, &r, &open, 2, 7, &episode, &mut expert).unwrap();
+    let mut expert = expert_actor(&r);
+    let b = evaluate_on_plant(&mut plant, &map, &r, &closed, 2, 7, &episode, &mut expert).unwrap();
+    let (fa, fb) = (a.eval.force_error_n.mean, b.eval.force_error_n.mean);
+    eprintln!(
+        "force error: open loop {fa:.3} N, admittance {fb:.3} N (offset {:.3} mm)",
+        b.admittance_offset_mm.mean
+    );
+    assert!(fa > 1.0, "the gap must show open loop: {fa} N");
+    assert!(fb < 0.2 * fa && fb < 0.3, "open {fa} N, closed {fb} N");
+    let off = b.admittance_offset_mm.mean;
+    assert!(off > 1.5 && off < 4.5, "offset {off} mm for a 3 mm gap");
+    assert_eq!(a.admittance_offset_mm.mean, 0.0);
+    // Without a force target (the circle) the layer does nothing.
+    let circle = |s: u64| Episode::new(TaskKind::Circle, &r.rest_tcp(), &contact, s);
+    let mut expert = expert_actor(&r);
+    let c = evaluate_on_plant(&mut plant, &map, &r, &closed, 1, 7, &circle, &mut expert).unwrap();
+    let mut expert = expert_actor(&r);
+    let d = evaluate_on_plant(&mut plant, &map, &r, &open, 1, 7, &circle, &mut expert).unwrap();
+    assert_eq!(c.eval.position_error_mm, d.eval.position_error_mm);
+    // A negative or NaN gain is refused.
+    for g in [-1e-4, f64::NAN] {
+        let bad = TransferConfig {
+            admittance: Some(Admittance {
+                gain_m_per_n: g,
+                ..Admittance::default()
+            }),
+            ..open
+        };
+        let mut expert = expert_actor(&r);
+        assert!(
+            evaluate_on_plant(&mut plant, &map, &r, &bad, 1, 7, &episode, &mut expert).is_err()
+        );
+    }
 }

@@ -199,6 +199,23 @@ pub struct SetupSamples {
     pub points_m: Vec<Vec<[f64; 3]>>,
 }
 
+impl SetupSamples {
+    /// No samples yet for this set-up and indenter.
+    fn empty(setup: &Setup, indenter: &Indenter) -> Self {
+        Self {
+            name: setup.name.clone(),
+            indenter: indenter.name.clone(),
+            unseen: setup.unseen,
+            depth_m: Vec::new(),
+            force_n: Vec::new(),
+            translation_m: Vec::new(),
+            displacement_m: Vec::new(),
+            nodal_force_n: Vec::new(),
+            points_m: Vec::new(),
+        }
+    }
+}
+
 /// Per-set-up entry of the manifest.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SetupEntry {
@@ -223,6 +240,10 @@ pub struct SetupEntry {
 pub struct Manifest {
     /// Format tag.
     pub format: String,
+    /// Which model made the fields: `fem`, or `reduced:<folder>` (empty in older data sets:
+    /// the FEM).
+    #[serde(default)]
+    pub model: String,
     /// Gel mesh file.
     pub mesh: String,
     /// Mesh nodes.
@@ -368,6 +389,59 @@ fn read_cache(dir: &Path, opts: &DatasetOptions, nodes: usize) -> Result<Vec<Ste
     Ok(out)
 }
 
+/// `count` random placements of the `base` set-ups' indenters over `gel` (issue item 6: random
+/// positions and rotations): set-up k takes base set-up k mod len, a rotation about z uniform in
+/// [0, 360) degrees added to its Euler z angle, and puts the centre of its tip (the part within
+/// 0.3 mm of its lowest point) uniformly over the top face shrunk by `margin_m` on each side.
+/// Named `r<seed>-<k>-<base>`; deterministic in `seed`.
+pub fn random_setups(
+    gel: &Gel,
+    base: &[Setup],
+    count: usize,
+    seed: u64,
+    margin_m: f64,
+) -> Result<Vec<Setup>> {
+    use rand::{Rng, SeedableRng};
+    if base.is_empty() && count > 0 {
+        return Err(TactileError::Input(
+            "random placements need at least one base set-up".into(),
+        ));
+    }
+    let (lo, hi) = gel.top_bounds();
+    if !(margin_m >= 0.0 && 2.0 * margin_m < (hi[0] - lo[0]).min(hi[1] - lo[1])) {
+        return Err(TactileError::Input(format!(
+            "placement margin {:.3} mm leaves no room on the {:.2} x {:.2} mm top face",
+            margin_m * 1e3,
+            (hi[0] - lo[0]) * 1e3,
+            (hi[1] - lo[1]) * 1e3
+        )));
+    }
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut loaded: Vec<Option<Indenter>> = vec![None; base.len()];
+    let mut out = Vec::with_capacity(count);
+    for k in 0..count {
+        let b = k % base.len();
+        if loaded[b].is_none() {
+            loaded[b] = Some(Indenter::from_stl(&base[b].stl)?);
+        }
+        let ind = loaded[b].as_ref().expect("loaded above");
+        let mut euler = base[b].placement.euler_deg;
+        euler[2] = (euler[2] + rng.random_range(0.0..360.0)) % 360.0;
+        let rot = crate::indenter::Pose::rotation_from_degrees(euler);
+        let tip = ind.tip_center_xy(&rot, 0.3e-3);
+        let target = [
+            rng.random_range(lo[0] + margin_m..hi[0] - margin_m),
+            rng.random_range(lo[1] + margin_m..hi[1] - margin_m),
+        ];
+        let mut s = base[b].clone();
+        s.name = format!("r{seed}-{k:04}-{}", base[b].name);
+        s.placement.xy_m = [target[0] - tip[0], target[1] - tip[1]];
+        s.placement.euler_deg = euler;
+        out.push(s);
+    }
+    Ok(out)
+}
+
 /// The samples of one set-up: the FEM steps from `cache` (reused when there, else run and
 /// written there; a step that does not converge ends the set-up, and the reason is returned
 /// beside the steps before it) and the contact points at each depth.
@@ -386,8 +460,9 @@ pub fn setup_samples(
     let mut run = Indentation::new(&setup.name, gel, &indenter, setup.placement, iopts)?;
     let mut steps = read_cache(cache, opts, gel.num_nodes())?;
     let mut stopped = None;
+    std::fs::create_dir_all(cache).map_err(|e| TactileError::io(cache, e))?;
+    setup.write_json(&cache.join("setup.json"))?;
     if steps.is_empty() {
-        std::fs::create_dir_all(cache).map_err(|e| TactileError::io(cache, e))?;
         let grid = Grid::for_gel(gel);
         let mut rows = Vec::new();
         for k in 1..=opts.steps {
@@ -415,17 +490,7 @@ pub fn setup_samples(
             opts.steps
         ));
     }
-    let mut s = SetupSamples {
-        name: setup.name.clone(),
-        indenter: indenter.name.clone(),
-        unseen: setup.unseen,
-        depth_m: Vec::new(),
-        force_n: Vec::new(),
-        translation_m: Vec::new(),
-        displacement_m: Vec::new(),
-        nodal_force_n: Vec::new(),
-        points_m: Vec::new(),
-    };
+    let mut s = SetupSamples::empty(setup, &indenter);
     for st in &steps {
         let pose = run.pose_at(st.depth_m);
         let placed = Placed {
@@ -475,11 +540,156 @@ pub fn build(
     opts: &DatasetOptions,
     cache: &Path,
     out: &Path,
+    progress: impl FnMut(&str, usize),
+) -> Result<Manifest> {
+    let top = TopSurface::from_gel(gel);
+    let cgrid = ContactGrid::for_gel(gel, opts.grid_spacing_m)?;
+    build_with(
+        gel,
+        mesh_name,
+        "fem",
+        setups,
+        opts,
+        out,
+        progress,
+        |setup| setup_samples(gel, &top, &cgrid, setup, opts, &cache.join(&setup.name)),
+    )
+}
+
+/// The samples of one set-up from the reduced model: the same depths and arrays as the FEM's
+/// (frictionless, warm-started from depth to depth). Its solve always returns, so nothing
+/// stops early.
+pub fn setup_samples_reduced(
+    gel: &Gel,
+    top: &TopSurface,
+    cgrid: &ContactGrid,
+    setup: &Setup,
+    opts: &DatasetOptions,
+    model: &crate::reduced::ReducedModel,
+    options: crate::reduced::ReducedOptions,
+) -> Result<SetupSamples> {
+    let indenter = Indenter::from_stl(&setup.stl)?;
+    let mut run = crate::reduced::ReducedIndentation::new(
+        &setup.name,
+        model,
+        gel,
+        &indenter,
+        setup.placement,
+        options,
+    )?;
+    let mut s = SetupSamples::empty(setup, &indenter);
+    for k in 1..=opts.steps {
+        let d = k as f64 * opts.step_m;
+        let f = run.advance_to(d)?;
+        let pose = run.pose_at(d);
+        let placed = Placed {
+            indenter: &indenter,
+            pose,
+        };
+        s.depth_m.push(d);
+        s.force_n.push(f.indenter_force_n);
+        s.translation_m.push(pose.translation.into());
+        s.displacement_m
+            .push(model.displacement_of(&top.nodes, &f.q));
+        s.nodal_force_n
+            .push(f.nodal_force(&top.nodes, gel.num_nodes()));
+        s.points_m.push(cgrid.contact_points(&placed));
+    }
+    Ok(s)
+}
+
+/// Builds the data set of `setups` into `out` with the reduced model `model` (saved in
+/// `model_dir`). Resumable: a set-up whose arrays are already in `out` is read back, not
+/// recomputed, so an interrupted run continues where it stopped.
+#[allow(clippy::too_many_arguments)]
+pub fn build_reduced(
+    gel: &Gel,
+    mesh_name: &str,
+    setups: &[Setup],
+    opts: &DatasetOptions,
+    model: &crate::reduced::ReducedModel,
+    model_dir: &Path,
+    options: crate::reduced::ReducedOptions,
+    out: &Path,
+    progress: impl FnMut(&str, usize),
+) -> Result<Manifest> {
+    model.check_gel(gel)?;
+    let top = TopSurface::from_gel(gel);
+    let cgrid = ContactGrid::for_gel(gel, opts.grid_spacing_m)?;
+    let tag = format!("reduced:{}", model_dir.display());
+    build_with(gel, mesh_name, &tag, setups, opts, out, progress, |setup| {
+        let dir = out.join(&setup.name);
+        if dir.join("point_counts.npy").is_file() {
+            return Ok((read_setup(&dir, setup, top.nodes.len())?, None));
+        }
+        let s = setup_samples_reduced(gel, &top, &cgrid, setup, opts, model, options)?;
+        Ok((s, None))
+    })
+}
+
+/// One set-up's arrays read back from `dir` (as [`write_setup`] wrote them).
+fn read_setup(dir: &Path, setup: &Setup, m: usize) -> Result<SetupSamples> {
+    let read = |name: &str, cols: usize| -> Result<Vec<f64>> {
+        let p = dir.join(name);
+        let a = ocm_fem::npy::read_f64_2d(&p)?;
+        if a.cols != cols {
+            return Err(TactileError::Input(format!(
+                "{}: {} columns, expected {cols} (another mesh?)",
+                p.display(),
+                a.cols
+            )));
+        }
+        Ok(a.data)
+    };
+    let rows3 =
+        |v: Vec<f64>| -> Vec<[f64; 3]> { v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect() };
+    let counts = read("point_counts.npy", 1)?;
+    let pts = rows3(read("points_m.npy", 3)?);
+    let mut points_m = Vec::new();
+    let mut at = 0;
+    for &c in &counts {
+        let end = (at + c as usize).min(pts.len());
+        points_m.push(pts[at..end].to_vec());
+        at = end;
+    }
+    let fields = |name: &str| -> Result<Vec<Vec<[f64; 3]>>> {
+        Ok(read(name, 3 * m)?
+            .chunks(3 * m)
+            .map(|r| rows3(r.to_vec()))
+            .collect())
+    };
+    Ok(SetupSamples {
+        name: setup.name.clone(),
+        indenter: setup
+            .stl
+            .file_stem()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        unseen: setup.unseen,
+        depth_m: read("depth_m.npy", 1)?,
+        force_n: rows3(read("force_n.npy", 3)?),
+        translation_m: rows3(read("translation_m.npy", 3)?),
+        displacement_m: fields("displacement_m.npy")?,
+        nodal_force_n: fields("nodal_force_n.npy")?,
+        points_m,
+    })
+}
+
+/// The data-set loop shared by the FEM and the reduced model: `samples` yields one set-up's
+/// samples (and why it stopped early, if it did).
+#[allow(clippy::too_many_arguments)]
+fn build_with(
+    gel: &Gel,
+    mesh_name: &str,
+    model: &str,
+    setups: &[Setup],
+    opts: &DatasetOptions,
+    out: &Path,
     mut progress: impl FnMut(&str, usize),
+    mut samples: impl FnMut(&Setup) -> Result<(SetupSamples, Option<String>)>,
 ) -> Result<Manifest> {
     std::fs::create_dir_all(out).map_err(|e| TactileError::io(out, e))?;
     let top = TopSurface::from_gel(gel);
-    let cgrid = ContactGrid::for_gel(gel, opts.grid_spacing_m)?;
     let idx: Vec<f64> = top.nodes.iter().map(|&i| i as f64).collect();
     write_npy(&out.join("top_nodes.npy"), &idx, idx.len(), 1)?;
     write_npy(
@@ -492,6 +702,7 @@ pub fn build(
     write_npy(&out.join("top_edges.npy"), &e, top.edges.len(), 2)?;
     let mut manifest = Manifest {
         format: FORMAT.into(),
+        model: model.into(),
         mesh: mesh_name.into(),
         mesh_nodes: gel.num_nodes(),
         top_nodes: top.nodes.len(),
@@ -503,7 +714,7 @@ pub fn build(
     };
     for (k, setup) in setups.iter().enumerate() {
         progress(&setup.name, k);
-        match setup_samples(gel, &top, &cgrid, setup, opts, &cache.join(&setup.name)) {
+        match samples(setup) {
             Ok((s, stopped)) => {
                 if let Some(why) = stopped {
                     manifest.stopped.push((setup.name.clone(), why));

@@ -94,12 +94,7 @@ struct Failure {
 pub struct Indentation<'a> {
     gel: &'a Gel,
     indenter: &'a Indenter,
-    rotation: Matrix3<f64>,
-    xy: [f64; 2],
-    tip_z: f64,
-    /// How far below the highest point of the gel the undeformed surface under the indenter
-    /// lies (the indenter travels this before touching), m.
-    touch_gap: f64,
+    approach: Approach,
     pattern: Pattern,
     linear: SparseSolver,
     slots: Vec<[u32; 9]>,
@@ -111,7 +106,6 @@ pub struct Indentation<'a> {
     pub depth_m: f64,
     /// Options.
     pub options: IndentOptions,
-    name: String,
     steps_done: usize,
 }
 
@@ -133,8 +127,7 @@ impl<'a> Indentation<'a> {
                 options.steps, options.step_m
             )));
         }
-        let rotation = Pose::rotation_from_degrees(placement.euler_deg);
-        let tip_z = indenter.lowest_z(&rotation);
+        let approach = Approach::new(name, gel, indenter, placement)?;
         let pattern = Pattern::new(&gel.model)?;
         let linear = SparseSolver::new(
             pattern.num_free(),
@@ -168,13 +161,10 @@ impl<'a> Indentation<'a> {
             gel.area_m2.clone(),
             &x,
         );
-        let mut ind = Indentation {
+        Ok(Indentation {
             gel,
             indenter,
-            rotation,
-            xy: placement.xy_m,
-            tip_z,
-            touch_gap: 0.0,
+            approach,
             pattern,
             linear,
             slots,
@@ -182,50 +172,66 @@ impl<'a> Indentation<'a> {
             contact,
             depth_m: 0.0,
             options,
-            name: name.to_string(),
             steps_done: 0,
-        };
-        ind.touch_gap = ind.first_touch()?;
-        Ok(ind)
+        })
     }
 
     /// Pose of the indenter at depth `depth_m`, measured from first touch of the undeformed gel.
     pub fn pose_at(&self, depth_m: f64) -> Pose {
-        Pose {
-            rotation: self.rotation,
-            translation: Vector3::new(
-                self.xy[0],
-                self.xy[1],
-                self.gel.z_top - self.touch_gap - depth_m - self.tip_z,
-            ),
-        }
+        self.approach.pose_at(depth_m)
     }
+}
 
-    /// Casts a ray up from every top-face node to the indenter with its tip at the gel's highest
-    /// point: the shortest hit is how far it must travel to touch. No hit: it misses the gel.
-    fn first_touch(&self) -> Result<f64> {
-        let pose = self.pose_at(0.0);
-        let up = self.rotation.transpose() * Vector3::z();
+/// How an indenter approaches the gel: its rotation and x-y position, and how far it travels
+/// along -z from the gel's highest level before it touches the undeformed top face.
+#[derive(Debug, Clone, Copy)]
+pub struct Approach {
+    /// Rotation of the indenter.
+    pub rotation: Matrix3<f64>,
+    /// Position of its origin over the gel (x, y), m.
+    pub xy_m: [f64; 2],
+    /// Lowest z of the rotated indenter relative to its origin, m.
+    pub tip_z_m: f64,
+    /// How far below the highest point of the gel the undeformed surface under the indenter
+    /// lies (the indenter travels this before touching), m.
+    pub touch_gap_m: f64,
+    /// Height of the gel's highest point, m.
+    pub z_top_m: f64,
+}
+
+impl Approach {
+    /// The approach of `indenter` placed at `placement` over `gel`. Casts a ray up from every
+    /// top-face node to the indenter with its tip at the gel's highest point: the shortest hit
+    /// is how far it must travel to touch. No hit: it misses the gel (`OffGel`, naming `name`).
+    pub fn new(name: &str, gel: &Gel, indenter: &Indenter, placement: Placement) -> Result<Self> {
+        let rotation = Pose::rotation_from_degrees(placement.euler_deg);
+        let mut a = Approach {
+            rotation,
+            xy_m: placement.xy_m,
+            tip_z_m: indenter.lowest_z(&rotation),
+            touch_gap_m: 0.0,
+            z_top_m: gel.z_top,
+        };
+        let pose = a.pose_at(0.0);
+        let up = rotation.transpose() * Vector3::z();
         let mut gap = f64::INFINITY;
-        for &i in &self.gel.top {
-            let x = Vector3::from(self.gel.mesh.points[i]);
+        for &i in &gel.top {
+            let x = Vector3::from(gel.mesh.points[i]);
             // Start below the top so nodes already under the tip's level are seen too.
             let origin = pose.to_local(&(x - Vector3::z() * 0.1));
-            if let Some(t) = self.indenter.ray_local(&origin, &up, 1.0) {
+            if let Some(t) = indenter.ray_local(&origin, &up, 1.0) {
                 gap = gap.min(t - 0.1);
             }
         }
         if gap.is_finite() {
-            return Ok(gap.max(0.0));
+            a.touch_gap_m = gap.max(0.0);
+            return Ok(a);
         }
-        let (lo, hi) = self.gel.top_bounds();
-        let placed = Placed {
-            indenter: self.indenter,
-            pose,
-        };
+        let (lo, hi) = gel.top_bounds();
+        let placed = Placed { indenter, pose };
         let (blo, bhi) = placed.bounds();
         Err(TactileError::OffGel {
-            setup: self.name.clone(),
+            setup: name.to_string(),
             msg: format!(
                 "pressed along -z the indenter (x {:.2}..{:.2} mm, y {:.2}..{:.2} mm) touches no \
                  node of the top face (x {:.2}..{:.2} mm, y {:.2}..{:.2} mm)",
@@ -241,6 +247,20 @@ impl<'a> Indentation<'a> {
         })
     }
 
+    /// Pose of the indenter at depth `depth_m`, measured from first touch of the undeformed gel.
+    pub fn pose_at(&self, depth_m: f64) -> Pose {
+        Pose {
+            rotation: self.rotation,
+            translation: Vector3::new(
+                self.xy_m[0],
+                self.xy_m[1],
+                self.z_top_m - self.touch_gap_m - depth_m - self.tip_z_m,
+            ),
+        }
+    }
+}
+
+impl Indentation<'_> {
     /// Surface nodes (indices into the surface list) near the placed indenter.
     fn candidates(&self, placed: &Placed) -> Vec<usize> {
         let (lo, hi) = placed.bounds();

@@ -160,6 +160,23 @@ impl Indenter {
             .fold(f64::INFINITY, f64::min)
     }
 
+    /// Centre (x, y) of the part of the surface within `band_m` of its lowest point after
+    /// rotating it by `rotation` about its own origin, m: where it first presses the gel.
+    pub fn tip_center_xy(&self, rotation: &Matrix3<f64>, band_m: f64) -> [f64; 2] {
+        let low = self.lowest_z(rotation);
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for v in self.mesh.vertices() {
+            let q = rotation * Vector3::new(v.x, v.y, v.z);
+            if q.z <= low + band_m {
+                for k in 0..2 {
+                    lo[k] = lo[k].min(q[k]);
+                    hi[k] = hi[k].max(q[k]);
+                }
+            }
+        }
+        [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])]
+    }
+
     /// Distance along +z from the local point `origin` (direction `dir`, local frame) to the
     /// surface, if the ray hits it within `max_m`.
     pub fn ray_local(&self, origin: &Vector3<f64>, dir: &Vector3<f64>, max_m: f64) -> Option<f64> {

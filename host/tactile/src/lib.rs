@@ -23,6 +23,7 @@ pub mod nets;
 pub mod optics;
 pub mod output;
 pub mod real;
+pub mod reduced;
 pub mod setup;
 pub mod shapes;
 

@@ -6,6 +6,7 @@
 use crate::gel::Gel;
 use crate::mask::{CLOSING_KERNEL_PX, Grid, Mask, mask_from_fn};
 use crate::metrics;
+use crate::optics::render::IDENTITY_COLOUR;
 use crate::optics::{CameraMap, Renderer, RgbImage, SurfaceSampler};
 use crate::{Result, TactileError};
 use serde::{Deserialize, Serialize};
@@ -184,7 +185,7 @@ pub fn score_masks(real: &Mask, fem: &Mask, px_per_m: f64) -> Result<(f64, f64, 
 }
 
 /// What the mask fit found.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct MaskFit {
     /// The gel-to-image map.
     pub map: CameraMap,
@@ -560,7 +561,7 @@ pub fn score_ssim_in(a: &RgbImage, b: &RgbImage, region: &[bool]) -> Result<f64>
 }
 
 /// Height smoothings tried by [`compare`], Gaussian sigma in pixels.
-pub const SMOOTHING_PX: [f32; 7] = [0.0, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0];
+pub const SMOOTHING_PX: [f32; 11] = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 10.0, 12.0];
 
 /// SSIM of two RGB images, the mean over channels.
 pub fn score_ssim(a: &RgbImage, b: &RgbImage) -> Result<f64> {
@@ -583,6 +584,55 @@ pub fn fit_gain(pairs: &[(RgbImage, &RgbImage)], bg: &RgbImage) -> f64 {
         }
     }
     if den > 0.0 { num / den } else { 1.0 }
+}
+
+/// Least-squares colour transform and depth shading of the optics: per output channel i,
+/// real_i - B_i ~ sum_j M[i][j] dS_j + g_i h over every pixel of the given (rendered with the
+/// identity transform and no depth term, real, heights as the renderer smoothed them) triples,
+/// with dS the rendered change. Returns (M, g in grey levels per m); without any sloped or
+/// pressed pixel, the identity and no depth term.
+pub fn fit_colour(
+    pairs: &[(RgbImage, &RgbImage, Vec<f32>)],
+    bg: &RgbImage,
+) -> ([[f64; 3]; 3], [f64; 3]) {
+    // Heights in units of 0.1 mm keep the normal equations balanced against grey levels.
+    const H_UNIT_M: f64 = 1e-4;
+    let mut ata = nalgebra::Matrix4::<f64>::zeros();
+    let mut atb = [nalgebra::Vector4::<f64>::zeros(); 3];
+    for (s, r, h) in pairs {
+        for (p, &hp) in h.iter().enumerate() {
+            let x = nalgebra::Vector4::new(
+                f64::from(s.data[p * 3]) - f64::from(bg.data[p * 3]),
+                f64::from(s.data[p * 3 + 1]) - f64::from(bg.data[p * 3 + 1]),
+                f64::from(s.data[p * 3 + 2]) - f64::from(bg.data[p * 3 + 2]),
+                f64::from(hp) / H_UNIT_M,
+            );
+            if x == nalgebra::Vector4::zeros() {
+                continue;
+            }
+            ata += x * x.transpose();
+            for ch in 0..3 {
+                atb[ch] += x * (f64::from(r.data[p * 3 + ch]) - f64::from(bg.data[p * 3 + ch]));
+            }
+        }
+    }
+    let mut m = [[0.0; 3]; 3];
+    let mut g = [0.0; 3];
+    // A regressor that never varies (a channel the table leaves unchanged) gets coefficient 0
+    // through a vanishing ridge instead of making the equations singular.
+    let ridge = 1e-9 * ata.trace().max(1e-12);
+    let chol = (ata + nalgebra::Matrix4::identity() * ridge).cholesky();
+    for ch in 0..3 {
+        match &chol {
+            Some(c) => {
+                let sol = c.solve(&atb[ch]);
+                m[ch] = [sol[0], sol[1], sol[2]];
+                g[ch] = sol[3] / H_UNIT_M;
+            }
+            None => m[ch][ch] = 1.0,
+        }
+    }
+    (m, g)
 }
 
 /// Renders FEM step displacements `u` with the renderer through `sampler`.
@@ -658,6 +708,16 @@ pub fn fem_masks(gel: &Gel, steps: &[Vec<[f64; 3]>]) -> Vec<Mask> {
         .collect()
 }
 
+/// Which optical parameters `compare` fits on the fitting frames (beside the smoothing).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum OpticsFit {
+    /// One gain on the calibrated change (least squares).
+    Gain,
+    /// A 3 x 3 colour transform of the calibrated change and a depth shading per channel
+    /// (least squares, [`fit_colour`]).
+    ColourDepth,
+}
+
 /// Options of the whole comparison.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CompareOptions {
@@ -665,6 +725,10 @@ pub struct CompareOptions {
     pub mask: MaskOptions,
     /// Step offsets tried on each side of the first-contact estimate.
     pub offset_window: usize,
+    /// The optical parameters fitted.
+    pub optics: OpticsFit,
+    /// A map and offset fitted before (skips the map fit, the slow part).
+    pub fixed_fit: Option<MaskFit>,
 }
 
 impl Default for CompareOptions {
@@ -672,6 +736,8 @@ impl Default for CompareOptions {
         CompareOptions {
             mask: MaskOptions::default(),
             offset_window: 4,
+            optics: OpticsFit::ColourDepth,
+            fixed_fit: None,
         }
     }
 }
@@ -693,6 +759,14 @@ pub struct Comparison {
     pub gain: f64,
     /// Height smoothing (Gaussian sigma, pixels) chosen on the fitting frames.
     pub smooth_px: f32,
+    /// Colour transform of the calibrated change fitted on the fitting frames
+    /// ([`crate::optics::Renderer::colour`]; identity under [`OpticsFit::Gain`]).
+    pub colour: [[f64; 3]; 3],
+    /// Depth shading, grey levels per m ([`crate::optics::Renderer::depth_gain`]).
+    pub depth_gain: [f64; 3],
+    /// Rendered-against-real scores with the scalar gain alone (the previous optics model),
+    /// for comparison; empty under [`OpticsFit::Gain`].
+    pub render_scalar_gain: Vec<RenderScore>,
     /// Mean contact-region SSIM (see [`RenderScore::contact_ssim`]) on the fitting frames with
     /// contact, at that smoothing and gain.
     pub fit_ssim: f64,
@@ -702,6 +776,46 @@ pub struct Comparison {
     pub render_gain1: Vec<RenderScore>,
     /// The baseline of rendering nothing: the background frame against each real frame.
     pub background_only: Vec<RenderScore>,
+}
+
+/// Fitting-frame SSIM, smoothing, gain, colour transform and depth shading of one optics fit.
+type FittedOptics = (f64, f32, f64, [[f64; 3]; 3], [f64; 3]);
+
+const IDENTITY_F64: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+
+/// Sets the renderer's optical parameters.
+pub fn set_optics(
+    r: &mut Renderer,
+    gain: f64,
+    smooth_px: f32,
+    colour: &[[f64; 3]; 3],
+    depth_gain: &[f64; 3],
+) {
+    r.gain = gain as f32;
+    r.smooth_px = smooth_px;
+    r.colour = colour.map(|row| row.map(|v| v as f32));
+    r.depth_gain = depth_gain.map(|v| v as f32);
+}
+
+/// The heights the renderer uses for real frame k (sampled, then smoothed by its
+/// `smooth_px`); zeros before first touch.
+fn smoothed_heights(
+    renderer: &Renderer,
+    sampler: &SurfaceSampler,
+    fields: &[Vec<[f64; 3]>],
+    offset: usize,
+    k: usize,
+) -> Result<Vec<f32>> {
+    let mut h = vec![0.0f32; sampler.rows * sampler.cols];
+    if let Some(u) = fem_field(fields, offset, k) {
+        sampler.heights(u, &mut h)?;
+    }
+    Ok(crate::optics::render::gaussian_blur(
+        &h,
+        sampler.rows,
+        sampler.cols,
+        renderer.smooth_px,
+    ))
 }
 
 /// Real frame k's FEM displacement under `offset` (None before first touch).
@@ -762,7 +876,10 @@ pub fn compare(
     let lo = centre.saturating_sub(opts.offset_window);
     let hi = centre + opts.offset_window;
     progress("fitting the gel-to-image map");
-    let fit = fit_map(&real, &fem, &fit_frames, lo..=hi)?;
+    let fit = match opts.fixed_fit {
+        Some(f) => f,
+        None => fit_map(&real, &fem, &fit_frames, lo..=hi)?,
+    };
     let masks = score_map(&real, &fem, &fit, &score_frames)?;
     progress("rendering");
     let sampler = SurfaceSampler::new(gel, bg.rows, bg.cols, &fit.map);
@@ -770,36 +887,57 @@ pub fn compare(
     // least-squares gain, then the smoothing with the best mean SSIM over the contact regions
     // (over the whole frame the unchanged background decides, and rendering faintly wins).
     let regions: Vec<Option<Vec<bool>>> = real.iter().map(contact_region).collect();
-    let mut best: Option<(f64, f32, f64)> = None;
-    for smooth in SMOOTHING_PX {
-        renderer.smooth_px = smooth;
-        renderer.gain = 1.0;
-        let mut pairs = Vec::new();
-        for &k in &fit_frames {
-            pairs.push((
-                render_paired(renderer, &sampler, fields, fit.offset_steps, k)?,
-                &frames[k],
-            ));
+    let fit_optics = |renderer: &mut Renderer, model: OpticsFit| -> Result<FittedOptics> {
+        let mut best: Option<FittedOptics> = None;
+        for smooth in SMOOTHING_PX {
+            renderer.smooth_px = smooth;
+            renderer.gain = 1.0;
+            renderer.colour = IDENTITY_COLOUR;
+            renderer.depth_gain = [0.0; 3];
+            let mut pairs = Vec::new();
+            let mut triples = Vec::new();
+            for &k in &fit_frames {
+                let img = render_paired(renderer, &sampler, fields, fit.offset_steps, k)?;
+                match model {
+                    OpticsFit::Gain => pairs.push((img, &frames[k])),
+                    OpticsFit::ColourDepth => {
+                        let h = smoothed_heights(renderer, &sampler, fields, fit.offset_steps, k)?;
+                        triples.push((img, &frames[k], h));
+                    }
+                }
+            }
+            let (gain, colour, depth) = match model {
+                OpticsFit::Gain => (fit_gain(&pairs, bg), IDENTITY_F64, [0.0; 3]),
+                OpticsFit::ColourDepth => {
+                    let (m, g) = fit_colour(&triples, bg);
+                    (1.0, m, g)
+                }
+            };
+            drop((pairs, triples));
+            set_optics(renderer, gain, smooth, &colour, &depth);
+            let (mut ssim, mut n) = (0.0, 0usize);
+            for &k in &fit_frames {
+                let Some(reg) = &regions[k] else { continue };
+                let img = render_paired(renderer, &sampler, fields, fit.offset_steps, k)?;
+                ssim += score_ssim_in(&img, &frames[k], reg)?;
+                n += 1;
+            }
+            let ssim = ssim / n.max(1) as f64;
+            if best.is_none_or(|b| ssim > b.0) {
+                best = Some((ssim, smooth, gain, colour, depth));
+            }
         }
-        let gain = fit_gain(&pairs, bg);
-        drop(pairs);
-        renderer.gain = gain as f32;
-        let (mut ssim, mut n) = (0.0, 0usize);
-        for &k in &fit_frames {
-            let Some(reg) = &regions[k] else { continue };
-            let img = render_paired(renderer, &sampler, fields, fit.offset_steps, k)?;
-            ssim += score_ssim_in(&img, &frames[k], reg)?;
-            n += 1;
-        }
-        let ssim = ssim / n.max(1) as f64;
-        if best.is_none_or(|b| ssim > b.0) {
-            best = Some((ssim, smooth, gain));
-        }
-    }
-    let (fit_ssim, smooth_px, gain) = best.unwrap_or((f64::NAN, 0.0, 1.0));
-    renderer.smooth_px = smooth_px;
+        Ok(best.unwrap_or((f64::NAN, 0.0, 1.0, IDENTITY_F64, [0.0; 3])))
+    };
+    let scalar = if opts.optics == OpticsFit::Gain {
+        None
+    } else {
+        Some(fit_optics(renderer, OpticsFit::Gain)?)
+    };
+    let (fit_ssim, smooth_px, gain, colour, depth_gain) = fit_optics(renderer, opts.optics)?;
     let mut render = Vec::new();
     let mut render_gain1 = Vec::new();
+    let mut render_scalar_gain = Vec::new();
     let mut background_only = Vec::new();
     for &k in &score_frames {
         if k.saturating_sub(fit.offset_steps) > fields.len() {
@@ -810,12 +948,15 @@ pub fn compare(
             frame: k,
             ..score_frame(bg, &frames[k], bg, &opts.mask, region)?
         });
-        for (g, sm, sink) in [
-            (gain, smooth_px, &mut render),
-            (1.0, 0.0, &mut render_gain1),
-        ] {
-            renderer.gain = g as f32;
-            renderer.smooth_px = sm;
+        let mut models = vec![
+            (gain, smooth_px, colour, depth_gain, &mut render),
+            (1.0, 0.0, IDENTITY_F64, [0.0; 3], &mut render_gain1),
+        ];
+        if let Some((_, sm, g, _, _)) = scalar {
+            models.push((g, sm, IDENTITY_F64, [0.0; 3], &mut render_scalar_gain));
+        }
+        for (g, sm, col, dep, sink) in models {
+            set_optics(renderer, g, sm, &col, &dep);
             let img = render_paired(renderer, &sampler, fields, fit.offset_steps, k)?;
             sink.push(RenderScore {
                 frame: k,
@@ -824,8 +965,7 @@ pub fn compare(
             });
         }
     }
-    renderer.gain = gain as f32;
-    renderer.smooth_px = smooth_px;
+    set_optics(renderer, gain, smooth_px, &colour, &depth_gain);
     Ok(Comparison {
         fit_frames,
         score_frames,
@@ -834,6 +974,9 @@ pub fn compare(
         masks,
         gain,
         smooth_px,
+        colour,
+        depth_gain,
+        render_scalar_gain,
         fit_ssim,
         render,
         render_gain1,

@@ -3,7 +3,7 @@
 
 use crate::indent::Placement;
 use crate::{Result, TactileError};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// One set-up as the files give it.
@@ -106,4 +106,79 @@ pub fn digit_setups(digit_dir: &Path) -> Result<Vec<Setup>> {
         true,
     )?);
     Ok(s)
+}
+
+/// A set-up as written beside its FEM results (`setup.json`): the indenter by file name, found
+/// again in the data directory's `indenters/` or `unseen-indenters/`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SetupFile {
+    /// Set-up name.
+    pub name: String,
+    /// File name of the indenter STL.
+    pub stl_file: String,
+    /// From the unseen set.
+    pub unseen: bool,
+    /// Indenter origin over the gel (x, y), m.
+    pub xy_m: [f64; 2],
+    /// Euler angles, degrees (R = Rz Ry Rx).
+    pub euler_deg: [f64; 3],
+}
+
+impl Setup {
+    /// Writes the set-up as `path` (JSON).
+    pub fn write_json(&self, path: &Path) -> Result<()> {
+        let f = SetupFile {
+            name: self.name.clone(),
+            stl_file: self
+                .stl
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            unseen: self.unseen,
+            xy_m: self.placement.xy_m,
+            euler_deg: self.placement.euler_deg,
+        };
+        let text = serde_json::to_string_pretty(&f)
+            .map_err(|e| TactileError::Input(format!("{}: {e}", path.display())))?;
+        std::fs::write(path, text).map_err(|e| TactileError::io(path, e))
+    }
+
+    /// Reads a set-up written by [`Setup::write_json`], resolving its STL in `digit_dir`; a
+    /// missing STL or a non-finite placement is an error naming the file.
+    pub fn read_json(path: &Path, digit_dir: &Path) -> Result<Setup> {
+        let text = std::fs::read_to_string(path).map_err(|e| TactileError::io(path, e))?;
+        let f: SetupFile = serde_json::from_str(&text)
+            .map_err(|e| TactileError::Input(format!("{}: {e}", path.display())))?;
+        let folder = if f.unseen {
+            "unseen-indenters"
+        } else {
+            "indenters"
+        };
+        let stl = digit_dir.join(folder).join(&f.stl_file);
+        if !stl.is_file() {
+            return Err(TactileError::Setup {
+                setup: f.name,
+                msg: format!(
+                    "{} names {}, which is missing",
+                    path.display(),
+                    stl.display()
+                ),
+            });
+        }
+        if f.xy_m.iter().chain(&f.euler_deg).any(|v| !v.is_finite()) {
+            return Err(TactileError::Setup {
+                setup: f.name,
+                msg: format!("{}: placement is not finite", path.display()),
+            });
+        }
+        Ok(Setup {
+            name: f.name,
+            stl,
+            placement: Placement {
+                xy_m: f.xy_m,
+                euler_deg: f.euler_deg,
+            },
+            unseen: f.unseen,
+        })
+    }
 }

@@ -94,6 +94,28 @@ pub fn block(a_m: f64, b_m: f64, h_m: f64) -> Result<Indenter> {
     Indenter::from_triangles("block", pts, tris)
 }
 
+/// The quarter block [0, l]^2 x [0, h] of the verification tests: `n`^3 hexes (as tets) graded
+/// towards the contact corner (0, 0, h) by x = l (f s + (1 - f) s^4) per axis (f = `fine`),
+/// symmetry rollers on x = 0 and y = 0 and a roller base, of modulus `young_pa` and Poisson's
+/// ratio `poisson`.
+pub fn quarter_block(
+    n: usize,
+    l_m: f64,
+    h_m: f64,
+    fine: f64,
+    young_pa: f64,
+    poisson: f64,
+) -> Result<crate::gel::Gel> {
+    let g = |s: f64| fine * s + (1.0 - fine) * s.powi(4);
+    let mesh = ocm_fem::mesh::generate::mapped_block([n, n, n], |u| {
+        [l_m * g(u[0]), l_m * g(u[1]), h_m * (1.0 - g(1.0 - u[2]))]
+    });
+    let tol = 1e-12;
+    crate::gel::Gel::with_constraints(mesh, crate::gel::GelMaterial { young_pa, poisson }, |p| {
+        [p.x < tol, p.y < tol, p.z < tol]
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -54,6 +54,8 @@ fn synthetic(n: usize, seed: u64) -> Pairs {
         setup_unseen: vec![false],
         setup: vec![0; n],
         depth_m: vec![0.0; n],
+        mirror: vec![0; n],
+        state: (0..n).collect(),
         delta,
         splat_dz_m: dz.clone(),
         dz_m: dz,
@@ -86,8 +88,15 @@ fn small(kind: NetKind) -> NetConfig {
 /// Held-out loss of training with true or shuffled targets, and the loss of a network that
 /// outputs the same (untrained) prediction for every sample would have: the mean-target loss.
 fn held_out_ratio(kind: NetKind, shuffle: Option<u64>) -> (f64, f64) {
+    held_out_ratio_with(kind, shuffle, 0.0)
+}
+
+/// [`held_out_ratio`] training with the perception network's contact-mask term at
+/// `mask_weight`; the held-out loss is eq 5.15's MSE alone either way.
+fn held_out_ratio_with(kind: NetKind, shuffle: Option<u64>, mask_weight: f32) -> (f64, f64) {
     let pairs = synthetic(40, 3);
-    let data = NetData::new(kind, &pairs);
+    let mut data = NetData::new(kind, &pairs);
+    data.mask_loss_weight = mask_weight;
     let split = Split {
         train: (0..32).collect(),
         val: (32..40).collect(),
@@ -106,6 +115,7 @@ fn held_out_ratio(kind: NetKind, shuffle: Option<u64>) -> (f64, f64) {
     };
     let report = nets::train(&data, net, &split, &tc, shuffle).unwrap();
     let first = report.curve[0].train_loss;
+    data.mask_loss_weight = 0.0;
     let held = ocm_learn::train::evaluate(&report.model, &split.val, 8, &cpu(), &|m, idx, d| {
         data.loss(m, idx, idx, d)
     });
@@ -151,6 +161,51 @@ fn perception_training_learns_and_fails_on_shuffled_targets() {
     assert!(
         held_shuffled > 0.6,
         "shuffled targets reach {held_shuffled} of the baseline: the test cannot fail"
+    );
+}
+
+/// The same with the contact-mask term beside the MSE (the trained figures use it).
+#[test]
+fn perception_with_mask_loss_learns_and_fails_on_shuffled_targets() {
+    let (held, _) = held_out_ratio_with(NetKind::Perception, None, 0.02);
+    assert!(held < 0.3, "held-out MSE / mean-target MSE {held}");
+    let (held_shuffled, _) = held_out_ratio_with(NetKind::Perception, Some(9), 0.02);
+    eprintln!("perception with mask loss: held-out {held}, shuffled {held_shuffled}");
+    assert!(
+        held_shuffled > 0.6,
+        "shuffled targets reach {held_shuffled} of the baseline: the test cannot fail"
+    );
+}
+
+/// The contact-mask term equals a direct sum: loss(w) - loss(0) = w mean(softplus(z) - y z)
+/// with z = (1 - dz_norm) / width from the network's own output and y the FEM contact mask.
+#[test]
+fn mask_loss_is_the_soft_threshold_cross_entropy() {
+    let pairs = synthetic(6, 8);
+    let mut data = NetData::new(NetKind::Perception, &pairs);
+    let net = small(NetKind::Perception).init(&cpu(), 3).unwrap();
+    let idx: Vec<usize> = (0..6).collect();
+    let dev = cpu();
+    let at = |d: &NetData| f64::from(ocm_learn::values(d.loss(&net, &idx, &idx, &dev))[0]);
+    let mse = at(&data);
+    data.mask_loss_weight = 0.5;
+    let with = at(&data);
+    let pred = data.predict(&net, &idx, 6, &dev);
+    let n = ROWS * COLS;
+    let (mut bce, mut contact) = (0.0, 0usize);
+    for (k, &dz) in pred.iter().enumerate() {
+        let z = (1.0 - nets::dz_to_target(f64::from(dz))) / f64::from(nets::MASK_LOGIT_WIDTH);
+        let y = -f64::from(pairs.dz_m[k]) > nets::CONTACT_DZ_M;
+        contact += usize::from(y);
+        // softplus without overflow: max(z, 0) + ln(1 + e^-|z|).
+        bce += z.max(0.0) + (-z.abs()).exp().ln_1p() - if y { z } else { 0.0 };
+    }
+    let bce = bce / (6 * n) as f64;
+    assert!(contact > 0 && contact < 6 * n, "{contact}");
+    assert!(
+        ((with - mse) / 0.5 - bce).abs() < 1e-3 * bce.abs().max(1.0),
+        "{} vs {bce}",
+        (with - mse) / 0.5
     );
 }
 

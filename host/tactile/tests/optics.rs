@@ -8,7 +8,9 @@ use ocm_tactile::gel::{Gel, GelMaterial};
 use ocm_tactile::mask::{Grid, mask_from_fn};
 use ocm_tactile::metrics;
 use ocm_tactile::optics::render::slopes;
-use ocm_tactile::optics::{CameraMap, GridToMesh, PolyCalib, Renderer, RgbImage, SurfaceSampler};
+use ocm_tactile::optics::{
+    CameraMap, GridToMesh, PolyCalib, Renderer, RgbImage, SurfaceSampler, camera,
+};
 use ocm_tactile::real::{self, MaskOptions};
 use std::io::Write;
 
@@ -459,4 +461,115 @@ fn grid_to_mesh_round_trip_on_the_gel() {
         worst < 4e-6 && mean < 1e-6,
         "worst {worst} m, mean {mean} m"
     );
+}
+
+/// `ocm tactile render` without `--map` frames the gel as the networks see it: the whole top
+/// face inside the 240 x 320 image. The mask grid itself has rows along gel y (the 20 mm side)
+/// and columns along gel x, so drawing it unrotated into a 240 x 320 image cut the DIGIT_v8
+/// gel's last 80 rows (5 mm) off: the bug this guards against. Checked on both meshes: on
+/// DIGIT_v8 the frame is exactly the networks' (0.0625 mm per pixel), on the coarse
+/// DIGIT_remesh2 (a larger top face) the gel is scaled to fit.
+#[test]
+fn default_render_map_shows_the_whole_gel() {
+    let (Some(fine), Some(coarse)) = (
+        test_data("digit/DIGIT_v8.vtk"),
+        test_data("digit/DIGIT_remesh2.vtk"),
+    ) else {
+        return;
+    };
+    let (rows, cols) = (real::ROWS, real::COLS);
+    for (mesh, exact) in [(fine, true), (coarse, false)] {
+        let gel = Gel::digit(&mesh, GelMaterial::default()).unwrap();
+        let grid = Grid::for_gel(&gel);
+        let map = camera::fit_landscape(&gel, rows, cols);
+        let (net_map, r1, c1) = camera::landscape_map(&gel, 1);
+        assert_eq!((r1, c1), (grid.cols, grid.rows));
+        assert_eq!(map == net_map, exact, "{mesh:?}: {grid:?}");
+        let mut covered_span = [[f64::INFINITY, f64::NEG_INFINITY]; 2];
+        for &i in &gel.top {
+            let q = map.to_px([gel.mesh.points[i][0], gel.mesh.points[i][1]]);
+            // The grid rounds the top face to whole pixels (DIGIT_v8: 20.00001 mm).
+            let inside = |v: f64, n: usize| (-1e-3..=n as f64 + 1e-3).contains(&v);
+            assert!(
+                inside(q[0], cols) && inside(q[1], rows),
+                "node {i} at {q:?}"
+            );
+            for k in 0..2 {
+                covered_span[k] = [covered_span[k][0].min(q[k]), covered_span[k][1].max(q[k])];
+            }
+        }
+        // Fills the image along at least one side.
+        let fill = (covered_span[0][1] - covered_span[0][0]) / cols as f64;
+        let fill = fill.max((covered_span[1][1] - covered_span[1][0]) / rows as f64);
+        assert!(fill > 0.99, "{mesh:?}: {covered_span:?}");
+        let s = SurfaceSampler::new(&gel, rows, cols, &map);
+        // DIGIT_remesh2's top face is not a full rectangle (90 % of its bounding box).
+        let least = if exact { 97 } else { 88 };
+        assert!(
+            s.covered() > rows * cols * least / 100,
+            "{mesh:?}: {}",
+            s.covered()
+        );
+        if exact {
+            // The old default, the mask grid drawn unrotated, left a quarter of the gel out.
+            let old = SurfaceSampler::new(&gel, rows, cols, &CameraMap::for_grid(&grid));
+            assert!(old.covered() < rows * cols * 80 / 100, "{}", old.covered());
+        }
+    }
+}
+
+/// The colour transform and depth shading: a renderer with a known transform M and depth gains
+/// g renders background + M dS + g h (dS the identity renderer's change, within rounding), a
+/// flat gel still renders the background, and `fit_colour` recovers M and g from such frames.
+#[test]
+fn colour_transform_and_depth_shading_are_recovered() {
+    let (rows, cols) = (48, 64);
+    let bg = uniform(rows, cols, [120, 110, 100]);
+    let p = 62.5e-6;
+    let plain = Renderer::new(bin_table(), &bg).unwrap();
+    let m = [[0.5f32, 0.2, 0.0], [-0.1, 0.3, 0.0], [0.25, 0.0, 0.0]];
+    let g = [-4.0e4f32, 1.0e4, -2.0e4];
+    let mut tuned = plain.clone();
+    tuned.colour = m;
+    tuned.depth_gain = g;
+    assert_eq!(tuned.render(&vec![0.0; rows * cols], p as f32).unwrap(), bg);
+    let mut triples = Vec::new();
+    let mut frames = Vec::new();
+    for (k, depth) in [2e-4, 4e-4, 6e-4].into_iter().enumerate() {
+        let (h, _) = dimple(rows, cols, p, 2e-3 + k as f64 * 1e-3, depth);
+        let base = plain.render(&h, p as f32).unwrap();
+        let got = tuned.render(&h, p as f32).unwrap();
+        for (i, &hi) in h.iter().enumerate() {
+            for ch in 0..3 {
+                let ds: Vec<f32> = (0..3)
+                    .map(|j| f32::from(base.data[i * 3 + j]) - f32::from(bg.data[i * 3 + j]))
+                    .collect();
+                let want = f32::from(bg.data[i * 3 + ch])
+                    + (0..3).map(|j| m[ch][j] * ds[j]).sum::<f32>()
+                    + g[ch] * hi;
+                let want = want.clamp(0.0, 255.0);
+                // The identity renderer's change was rounded: M spreads 0.5 over the row.
+                let tol = 0.5 * m[ch].iter().map(|v| v.abs()).sum::<f32>() + 0.51;
+                let v = f32::from(got.data[i * 3 + ch]);
+                assert!((v - want).abs() <= tol, "pixel {i} ch {ch}: {v} vs {want}");
+            }
+        }
+        frames.push(got);
+        triples.push((base, h));
+    }
+    let t: Vec<(RgbImage, &RgbImage, Vec<f32>)> = triples
+        .into_iter()
+        .zip(&frames)
+        .map(|((base, h), f)| (base, f, h))
+        .collect();
+    let (mf, gf) = real::fit_colour(&t, &bg);
+    for ch in 0..3 {
+        for j in 0..3 {
+            assert!((mf[ch][j] - f64::from(m[ch][j])).abs() < 0.03, "{mf:?}");
+        }
+        assert!(
+            (gf[ch] - f64::from(g[ch])).abs() < 0.05 * 4e4,
+            "{gf:?} vs {g:?}"
+        );
+    }
 }

@@ -28,6 +28,8 @@ use crate::statespace::StateSpace;
 const WINDOW_ROWS: usize = 10_000;
 /// Most training rows scored while refining (evenly thinned).
 const SCORED_ROWS: usize = 3000;
+/// Leads (samples) of the internal coordinate's extra starts, `c_z = C A^j`.
+const LEAD_SAMPLES: [usize; 4] = [1, 2, 4, 8];
 /// Levenberg-Marquardt iterations.
 const ITERATIONS: usize = 25;
 /// Relative decrease of the training cost below which the refinement stops: the criteria
@@ -400,8 +402,29 @@ impl Prepared<'_> {
             t
         };
         let starts = [scaled(1.0), scaled(0.5), scaled(0.25), scaled(0.0)];
+        // Starts whose internal coordinate leads the output, `c_z = C A^j` (the zero-input
+        // prediction of the output j samples ahead): where the force acts on an unmeasured
+        // part of a structure (the first of two masses), that part moves before the measured
+        // one, and a friction's sign or a stop operator's reversal on the output comes too
+        // late. The refinement moves `c_z` only locally (a sign's gradient is nearly zero
+        // away from reversals), so the start decides; the one of lowest cost is kept.
+        let leads: Vec<Vec<f64>> = {
+            let mut out = Vec::new();
+            let mut ca = DMatrix::from_row_slice(1, n, &coef[..n]);
+            for j in 1..=LEAD_SAMPLES[LEAD_SAMPLES.len() - 1] {
+                ca = &ca * &ss.a;
+                if LEAD_SAMPLES.contains(&j) {
+                    for f in [1.0, 0.5] {
+                        let mut t = scaled(f);
+                        t[lay.cz()..].copy_from_slice(ca.as_slice());
+                        out.push(t);
+                    }
+                }
+            }
+            out
+        };
         let mut best: Option<(f64, Vec<f64>, Vec<f64>)> = None;
-        for t in starts.into_iter().chain(warm) {
+        for t in starts.into_iter().chain(leads).chain(warm) {
             if let Some(rt) = residuals(&t) {
                 let ct = cost_of(&rt);
                 if best.as_ref().is_none_or(|b| ct < b.0) {

@@ -29,6 +29,10 @@ pub const CONTACT_DZ_M: f64 = 30e-6;
 pub const DZ_SCALE_M: f64 = 1e-3;
 /// Fourier frequencies of the positional encoding (eq 5.18).
 pub const FOURIER_FREQS: usize = 4;
+/// Width of the soft contact threshold of the perception network's mask loss, in normalised
+/// dz units (0.02 is 15 um): the contact logit is (1 - dz_norm) / this, 0 at the 30 um mask
+/// threshold (which sits exactly at dz_norm = 1, dz_max being -30 um).
+pub const MASK_LOGIT_WIDTH: f32 = 0.02;
 
 /// u_z (m) -> the perception network's target: 0 at dz_min, 1 at dz_max (no clipping, so an
 /// undeformed pixel sits slightly above 1).
@@ -163,8 +167,12 @@ pub struct NetData {
     pub target: Vec<f32>,
     /// Target channels.
     pub target_channels: usize,
-    /// Contact mask per sample `[rows, cols]` from the splatted dz (rendering loss, eq 5.20).
+    /// Contact mask per sample `[rows, cols]`: from the splatted dz (rendering loss, eq 5.20),
+    /// from the rasterised dz (perception's mask loss).
     pub mask: Vec<f32>,
+    /// Weight of the perception network's contact-mask term (binary cross-entropy of the soft
+    /// threshold, see [`MASK_LOGIT_WIDTH`]) beside eq 5.15's MSE; 0 is eq 5.15 alone.
+    pub mask_loss_weight: f32,
     coords: Vec<f32>,
 }
 
@@ -184,7 +192,12 @@ impl NetData {
                     .map(|&v| dz_to_target(f64::from(v)) as f32)
                     .collect(),
                 target_channels: 1,
-                mask: Vec::new(),
+                mask: p
+                    .dz_m
+                    .iter()
+                    .map(|&v| f32::from(-f64::from(v) > CONTACT_DZ_M))
+                    .collect(),
+                mask_loss_weight: 0.0,
                 coords: Vec::new(),
             },
             NetKind::Rendering => NetData {
@@ -210,6 +223,7 @@ impl NetData {
                         }
                     })
                     .collect(),
+                mask_loss_weight: 0.0,
                 coords: coordinate_channels(p.rows, p.cols),
             },
         }
@@ -260,8 +274,9 @@ impl NetData {
     }
 
     /// The loss of `net` on the inputs `idx` against the targets of `target_idx` (the same
-    /// samples, or shuffled ones for a control): MSE on the dz channel (eq 5.15) or the masked
-    /// weighted L1 (eq 5.19-5.22).
+    /// samples, or shuffled ones for a control): MSE on the dz channel (eq 5.15), plus the
+    /// contact-mask term when [`NetData::mask_loss_weight`] is set, or the masked weighted L1
+    /// (eq 5.19-5.22).
     pub fn loss(
         &self,
         net: &UNet,
@@ -279,7 +294,19 @@ impl NetData {
             device,
         );
         match self.kind {
-            NetKind::Perception => (out.narrow(1, 2, 1) - target).powi_scalar(2).mean(),
+            NetKind::Perception => {
+                let dz = out.narrow(1, 2, 1);
+                let mse = (dz.clone() - target).powi_scalar(2).mean();
+                if self.mask_loss_weight > 0.0 {
+                    // BCE with logits z: softplus(z) - y z.
+                    let m = self.rows_of(&self.mask, n, target_idx, 1, device);
+                    let z = dz.neg().add_scalar(1.0).div_scalar(MASK_LOGIT_WIDTH);
+                    let bce = (activation::softplus(z.clone(), 1.0) - z * m).mean();
+                    mse + bce.mul_scalar(self.mask_loss_weight)
+                } else {
+                    mse
+                }
+            }
             NetKind::Rendering => {
                 let pred = activation::tanh(out);
                 let m = self.rows_of(&self.mask, n, target_idx, 1, device);

@@ -31,6 +31,11 @@ pub struct Pairs {
     pub setup: Vec<usize>,
     /// Indentation depth of each sample, m.
     pub depth_m: Vec<f64>,
+    /// Mirror of each sample: 0 none, bit 0 the image rows reversed (gel x mirrored), bit 1
+    /// the columns (gel y); see [`build_pairs_mirrored`].
+    pub mirror: Vec<u8>,
+    /// The FEM state each sample was rendered from (its index among the unmirrored samples).
+    pub state: Vec<usize>,
     /// Rendered minus background, grey levels, per sample `[3, rows, cols]` channel-major.
     pub delta: Vec<f32>,
     /// Surface displacement u_z on the image grid (negative into the gel), m, per sample
@@ -59,10 +64,20 @@ impl Pairs {
         self.rows * self.cols
     }
 
-    /// Samples of the seen (`unseen` false) or unseen set-ups.
+    /// Unmirrored samples of the seen (`unseen` false) or unseen set-ups.
     pub fn samples_where_unseen(&self, unseen: bool) -> Vec<usize> {
         (0..self.len())
-            .filter(|&i| self.setup_unseen[self.setup[i]] == unseen)
+            .filter(|&i| self.setup_unseen[self.setup[i]] == unseen && self.mirror[i] == 0)
+            .collect()
+    }
+
+    /// The mirrored copies of the unmirrored samples `originals` (for training on them
+    /// without leaking a validation state into training).
+    pub fn mirrors_of(&self, originals: &[usize]) -> Vec<usize> {
+        let states: std::collections::HashSet<usize> =
+            originals.iter().map(|&i| self.state[i]).collect();
+        (0..self.len())
+            .filter(|&i| self.mirror[i] != 0 && states.contains(&self.state[i]))
             .collect()
     }
 
@@ -202,26 +217,30 @@ pub fn splat(
         .collect()
 }
 
-/// The gel seen as a 240 x 320 landscape image like the DIGIT's: the gel's mask grid
-/// transposed (image rows along gel x, columns along gel y, 0.0625 mm per pixel), reduced by
-/// `scale`. Returns the map and the image size (rows, cols).
+/// The image frame of the pairs: [`crate::optics::camera::landscape_map`].
 pub fn image_map(gel: &Gel, scale: usize) -> (CameraMap, usize, usize) {
-    let g = Grid::for_gel(gel);
-    let s = 1.0 / (g.pixel_m * scale as f64);
-    // Mirror y then turn a quarter: (x, y) -> (y, x), a transposition.
-    let map = CameraMap {
-        px_per_m: s,
-        angle_rad: std::f64::consts::FRAC_PI_2,
-        mirror: true,
-        offset_px: [-g.origin_m[1] * s, -g.origin_m[0] * s],
-    };
-    (map, g.cols / scale, g.rows / scale)
+    crate::optics::camera::landscape_map(gel, scale)
 }
 
 /// Renders every sample of `ds` (on `gel`, the mesh the dataset was built on) with `renderer`
 /// (background of the full image size, 240 x 320) and reduces images and fields by `scale`
 /// (1 or a divisor of both sides: block means).
 pub fn build_pairs(ds: &Dataset, gel: &Gel, renderer: &Renderer, scale: usize) -> Result<Pairs> {
+    build_pairs_mirrored(ds, gel, renderer, scale, false)
+}
+
+/// [`build_pairs`], and with `mirror` three more samples per state of the seen set-ups: the
+/// surface mirrored across the image rows, the columns and both, each rendered anew (the
+/// calibration depends on the slope direction and the image position, so a mirrored image
+/// would not be a valid frame; the mirrored surface is, the gel being symmetric about its
+/// centre lines). Mirrored samples come after the unmirrored ones.
+pub fn build_pairs_mirrored(
+    ds: &Dataset,
+    gel: &Gel,
+    renderer: &Renderer,
+    scale: usize,
+    mirror: bool,
+) -> Result<Pairs> {
     let (rows0, cols0) = (renderer.rows, renderer.cols);
     if scale == 0 || rows0 % scale != 0 || cols0 % scale != 0 {
         return Err(TactileError::Input(format!(
@@ -263,39 +282,98 @@ pub fn build_pairs(ds: &Dataset, gel: &Gel, renderer: &Renderer, scale: usize) -
         setup_unseen: ds.setups.iter().map(|s| s.unseen).collect(),
         setup: Vec::new(),
         depth_m: Vec::new(),
+        mirror: Vec::new(),
+        state: Vec::new(),
         delta: Vec::new(),
         dz_m: Vec::new(),
         splat_dz_m: Vec::new(),
         background,
     };
     let mut h = vec![0.0f32; rows0 * cols0];
+    let mut hm = vec![0.0f32; rows0 * cols0];
     let mut img = vec![0u8; rows0 * cols0 * 3];
+    let mut state = 0;
+    let mut later = Vec::new();
     for (si, s) in ds.setups.iter().enumerate() {
         for (k, u_top) in s.displacement_m.iter().enumerate() {
             let u = top.extend(u_top, gel.num_nodes());
             sampler.heights(&u, &mut h)?;
-            renderer.render_into(&h, sampler.m_per_px as f32, &mut img)?;
-            for ch in 0..3 {
-                let d: Vec<f32> = (0..rows0 * cols0)
-                    .map(|p| f32::from(img[p * 3 + ch]) - f32::from(bg0.data[p * 3 + ch]))
-                    .collect();
-                out.delta.extend(block_mean(&d, rows0, cols0, scale));
-            }
-            let dz: Vec<f32> = h.iter().map(|v| -v).collect();
-            out.dz_m.extend(block_mean(&dz, rows0, cols0, scale));
             let vals: Vec<f64> = u_top.iter().map(|u| u[2]).collect();
-            out.splat_dz_m.extend(splat(
-                &node_px,
-                &vals,
-                rows,
-                cols,
-                SPLAT_SIGMA_PX / scale as f64,
-            ));
-            out.setup.push(si);
-            out.depth_m.push(s.depth_m[k]);
+            let variants: &[u8] = if mirror && !s.unseen {
+                &[0, 1, 2, 3]
+            } else {
+                &[0]
+            };
+            for &m in variants {
+                mirror_into(&h, rows0, cols0, m, &mut hm);
+                renderer.render_into(&hm, sampler.m_per_px as f32, &mut img)?;
+                let mut d = Vec::with_capacity(3 * rows * cols);
+                for ch in 0..3 {
+                    let dc: Vec<f32> = (0..rows0 * cols0)
+                        .map(|p| f32::from(img[p * 3 + ch]) - f32::from(bg0.data[p * 3 + ch]))
+                        .collect();
+                    d.extend(block_mean(&dc, rows0, cols0, scale));
+                }
+                let dz: Vec<f32> = hm.iter().map(|v| -v).collect();
+                let px: Vec<[f64; 2]> = node_px
+                    .iter()
+                    .map(|q| {
+                        [
+                            if m & 2 != 0 { cols as f64 - q[0] } else { q[0] },
+                            if m & 1 != 0 { rows as f64 - q[1] } else { q[1] },
+                        ]
+                    })
+                    .collect();
+                let sample = (
+                    d,
+                    block_mean(&dz, rows0, cols0, scale),
+                    splat(&px, &vals, rows, cols, SPLAT_SIGMA_PX / scale as f64),
+                    si,
+                    s.depth_m[k],
+                    m,
+                    state,
+                );
+                if m == 0 {
+                    push_sample(&mut out, sample);
+                } else {
+                    later.push(sample);
+                }
+            }
+            state += 1;
         }
     }
+    for sample in later {
+        push_sample(&mut out, sample);
+    }
     Ok(out)
+}
+
+type Sample = (Vec<f32>, Vec<f32>, Vec<f32>, usize, f64, u8, usize);
+
+fn push_sample(out: &mut Pairs, (delta, dz, splat, setup, depth, mirror, state): Sample) {
+    out.delta.extend(delta);
+    out.dz_m.extend(dz);
+    out.splat_dz_m.extend(splat);
+    out.setup.push(setup);
+    out.depth_m.push(depth);
+    out.mirror.push(mirror);
+    out.state.push(state);
+}
+
+/// `h` (rows x cols) into `out` with the rows reversed (bit 0 of `m`) and the columns (bit 1).
+pub fn mirror_into(h: &[f32], rows: usize, cols: usize, m: u8, out: &mut [f32]) {
+    for r in 0..rows {
+        let rs = if m & 1 != 0 { rows - 1 - r } else { r };
+        let src = &h[rs * cols..][..cols];
+        let dst = &mut out[r * cols..][..cols];
+        if m & 2 != 0 {
+            for (d, s) in dst.iter_mut().zip(src.iter().rev()) {
+                *d = *s;
+            }
+        } else {
+            dst.copy_from_slice(src);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -323,6 +401,22 @@ mod tests {
                 .all(|v| (v - 0.7).abs() < 1e-6)
         );
         assert_eq!(block_mean(&[1.0, 3.0, 5.0, 7.0], 2, 2, 2), vec![4.0]);
+    }
+
+    /// Mirroring reverses rows (bit 0), columns (bit 1) or both, and is its own inverse.
+    #[test]
+    fn mirroring() {
+        let h: Vec<f32> = (0..6).map(|v| v as f32).collect();
+        let mut o = vec![0.0; 6];
+        mirror_into(&h, 2, 3, 1, &mut o);
+        assert_eq!(o, [3.0, 4.0, 5.0, 0.0, 1.0, 2.0]);
+        mirror_into(&h, 2, 3, 2, &mut o);
+        assert_eq!(o, [2.0, 1.0, 0.0, 5.0, 4.0, 3.0]);
+        mirror_into(&h, 2, 3, 3, &mut o);
+        assert_eq!(o, [5.0, 4.0, 3.0, 2.0, 1.0, 0.0]);
+        let mut back = vec![0.0; 6];
+        mirror_into(&o, 2, 3, 3, &mut back);
+        assert_eq!(back, h);
     }
 
     /// Delta and frame are inverse (up to rounding) and sizes are checked.

@@ -61,6 +61,47 @@ impl CameraMap {
     }
 }
 
+/// The gel seen as a 240 x 320 landscape image like the DIGIT's: the gel's mask grid
+/// transposed (image rows along gel x, columns along gel y, 0.0625 mm per pixel), reduced by
+/// `scale`. Returns the map and the image size (rows, cols). This is the frame of the
+/// networks' pairs and of `ocm tactile render` without a fitted map.
+pub fn landscape_map(gel: &Gel, scale: usize) -> (CameraMap, usize, usize) {
+    let g = Grid::for_gel(gel);
+    let scale = scale.max(1);
+    let s = 1.0 / (g.pixel_m * scale as f64);
+    // Mirror y then turn a quarter: (x, y) -> (y, x), a transposition.
+    let map = CameraMap {
+        px_per_m: s,
+        angle_rad: std::f64::consts::FRAC_PI_2,
+        mirror: true,
+        offset_px: [-g.origin_m[1] * s, -g.origin_m[0] * s],
+    };
+    (map, g.cols / scale, g.rows / scale)
+}
+
+/// The landscape frame of [`landscape_map`] fitted into a `rows` x `cols` image: the map
+/// itself where the gel's grid has that size (DIGIT_v8 at 240 x 320), otherwise the gel
+/// scaled to the largest size that fits and centred, so no part of the top face is cut off.
+pub fn fit_landscape(gel: &Gel, rows: usize, cols: usize) -> CameraMap {
+    let (map, r, c) = landscape_map(gel, 1);
+    if (r, c) == (rows, cols) {
+        return map;
+    }
+    let (lo, hi) = gel.top_bounds();
+    // Image rows run along gel x, columns along gel y.
+    let s = (rows as f64 / (hi[0] - lo[0])).min(cols as f64 / (hi[1] - lo[1]));
+    let mid = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
+    CameraMap {
+        px_per_m: s,
+        angle_rad: std::f64::consts::FRAC_PI_2,
+        mirror: true,
+        offset_px: [
+            cols as f64 / 2.0 - mid[1] * s,
+            rows as f64 / 2.0 - mid[0] * s,
+        ],
+    }
+}
+
 /// Precomputed linear interpolation of top-face nodal values at the image's pixel centres:
 /// each pixel remembers the top triangle (in the rest configuration, projected on x-y) that
 /// holds it and its barycentric weights; pixels off the gel get weight zero (a flat surface).

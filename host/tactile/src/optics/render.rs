@@ -167,7 +167,18 @@ pub struct Renderer {
     /// Standard deviation of a Gaussian applied to the heights before the slopes, pixels (0:
     /// none); stands in for the gel's coating and the camera's defocus, fitted on real frames.
     pub smooth_px: f32,
+    /// Colour transform of the calibrated change: output channel `i` gets
+    /// sum_j colour[i][j] dS_j (identity as calibrated; fitted when the sensor's LEDs and
+    /// camera differ from the calibrating one's).
+    pub colour: [[f32; 3]; 3],
+    /// Change per metre of (smoothed) height towards the camera, grey levels per m, per
+    /// channel (0 as calibrated): the shading the slope table does not carry (the pressed gel
+    /// darkens where it is deepest), fitted on real frames.
+    pub depth_gain: [f32; 3],
 }
+
+/// The identity colour transform.
+pub const IDENTITY_COLOUR: [[f32; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 /// Box radius of each of the three passes of [`gaussian_blur`] for standard deviation `sigma`
 /// (Wells 1986: three boxes of width w with 3 (w^2 - 1) / 12 = sigma^2).
@@ -297,6 +308,8 @@ impl Renderer {
             basis: bas,
             gain: 1.0,
             smooth_px: 0.0,
+            colour: IDENTITY_COLOUR,
+            depth_gain: [0.0; 3],
         })
     }
 
@@ -362,6 +375,9 @@ impl Renderer {
         };
         let inv = 1.0 / m_per_px;
         let flat2 = self.calib.flat_slope2();
+        let identity = self.colour == IDENTITY_COLOUR;
+        let depth = self.depth_gain != [0.0; 3];
+        let m = self.colour.map(|row| row.map(|v| v * self.gain));
         out.par_chunks_mut(cols * 3)
             .enumerate()
             .with_min_len(16)
@@ -388,15 +404,31 @@ impl Renderer {
                     let px = &mut line[c * 3..c * 3 + 3];
                     let bgp = &bg[c * 3..c * 3 + 3];
                     let t2 = sr * sr + sc * sc;
-                    if t2 < flat2 {
-                        px.copy_from_slice(bgp);
-                        continue;
+                    let mut d = [0.0f32; 3];
+                    if depth {
+                        d = self.depth_gain.map(|g| g * mid[c]);
                     }
-                    let bin = self.calib.bin_sloped(sr, sc, t2);
-                    let b = &basis[c];
+                    if t2 < flat2 {
+                        // A change below half a grey level rounds back to the background.
+                        if !depth || d.iter().all(|v| v.abs() < 0.5) {
+                            px.copy_from_slice(bgp);
+                            continue;
+                        }
+                    } else {
+                        let bin = self.calib.bin_sloped(sr, sc, t2);
+                        let b = &basis[c];
+                        let ds: [f32; 3] =
+                            std::array::from_fn(|ch| self.calib.eval(bin, ch, b) - flat[c][ch]);
+                        for ch in 0..3 {
+                            d[ch] += if identity {
+                                self.gain * ds[ch]
+                            } else {
+                                m[ch][0] * ds[0] + m[ch][1] * ds[1] + m[ch][2] * ds[2]
+                            };
+                        }
+                    }
                     for ch in 0..3 {
-                        let v = f32::from(bgp[ch])
-                            + self.gain * (self.calib.eval(bin, ch, b) - flat[c][ch]);
+                        let v = f32::from(bgp[ch]) + d[ch];
                         // Round half up on the clamped value: round() for the 0..255 range,
                         // without the libm call.
                         px[ch] = (v.clamp(0.0, 255.0) + 0.5) as u8;

@@ -1,0 +1,932 @@
+//! The reduced tactile model (dissertation Ch.5.4.2, eq 5.1-5.5): a POD basis of the gel's
+//! displacement fields over many FEM indentations and a reduced static solve with contact.
+//!
+//! Basis: the snapshots u (3N, whole gel, metres) of full-FEM indentations go through the
+//! workspace's randomized SVD (`ocm_mor::pod::pod`); u ~ Phi q (eq 5.4) with r modes.
+//! Stiffness: eq 5.5 with the nonlinear operator K(u) of eq 5.1 taken at rest, K_r = Phi^T K_0 Phi
+//! (r x r, computed once from the fem tangent). A nonlinear reduced operator would need the full
+//! element loop (or a hyper-reduction) at every iteration; the figures in the README say what
+//! the linearisation costs against the Neo-Hookean FEM.
+//!
+//! Contact (frictionless, as the data sets' FEM): the same node-to-surface law as [`crate::contact`],
+//! p_i = max(0, lambda_i - k_i g_i) with k_i = eps_n A_i, on the gel's surface nodes. Each pass
+//! queries the signed distances g_i and normals n_i (parry) at the current q and linearises
+//! g_i(q') = g_i + a_i . (q' - q) with a_i = Phi_i^T n_i; the penalty problem is then solved
+//! exactly by a semismooth Newton on the active set, (K_r + sum_A k_i a_i a_i^T) q' =
+//! sum_A a_i (lambda_i - k_i g_i + k_i a_i . q). Passes repeat until q settles, then the
+//! augmented-Lagrangian multipliers are updated until the penetration is within the tolerance
+//! (or the update budget is spent: the frame reports its penetration).
+//! A node is queried only when the 1-Lipschitz bound on its signed distance (last queried gap
+//! minus how far it and the indenter moved since) could bring it within reach of contact.
+
+use crate::gel::Gel;
+use crate::indent::{Approach, Placement};
+use crate::indenter::{Indenter, Placed, Pose};
+use crate::{Result, TactileError};
+use faer::Mat;
+use nalgebra::{DMatrix, DVector, Vector3};
+use ocm_fem::model::{Loads, Pattern};
+use ocm_mor::pod::{PodOptions, pod};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+const FORMAT: &str = "ocm-tactile-reduced/1";
+
+/// What a saved reduced model was built from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ReducedInfo {
+    /// Format tag.
+    pub format: String,
+    /// Gel mesh file name.
+    pub mesh: String,
+    /// Mesh nodes (3N rows of the modes).
+    pub mesh_nodes: usize,
+    /// Modes kept.
+    pub rank: usize,
+    /// Gel Young's modulus, Pa, and Poisson's ratio.
+    pub material: [f64; 2],
+    /// Snapshots in the POD.
+    pub snapshots: usize,
+    /// Where the snapshots came from (FEM folders or set-up names).
+    pub sources: Vec<String>,
+    /// Fraction of the snapshot energy the modes capture.
+    pub captured_energy: f64,
+}
+
+/// A POD basis of the gel with its reduced stiffness.
+#[derive(Debug, Clone)]
+pub struct ReducedModel {
+    /// Description.
+    pub info: ReducedInfo,
+    /// Modes, row-major 3N x r: row 3 i + d is DOF d of node i.
+    pub modes: Vec<f64>,
+    /// K_r = Phi^T K_0 Phi, r x r.
+    pub stiffness: DMatrix<f64>,
+    /// Singular values of the snapshot matrix (all that were computed), m.
+    pub singular_values: Vec<f64>,
+}
+
+impl ReducedModel {
+    /// Modes kept.
+    pub fn rank(&self) -> usize {
+        self.info.rank
+    }
+
+    /// POD of `snapshots` (displacement fields over all nodes of `gel`, m) and the reduced
+    /// stiffness at rest. `sources` is recorded in the description.
+    pub fn build(
+        gel: &Gel,
+        mesh: &str,
+        snapshots: &[Vec<[f64; 3]>],
+        sources: Vec<String>,
+        opts: &PodOptions,
+    ) -> Result<Self> {
+        let n = gel.num_nodes();
+        if snapshots.is_empty() {
+            return Err(TactileError::Input(
+                "the reduced model needs at least one snapshot".into(),
+            ));
+        }
+        if let Some((k, s)) = snapshots.iter().enumerate().find(|(_, s)| s.len() != n) {
+            return Err(TactileError::Input(format!(
+                "snapshot {k} has {} nodes, the gel {n} (another mesh?)",
+                s.len()
+            )));
+        }
+        let a = Mat::<f64>::from_fn(3 * n, snapshots.len(), |i, j| snapshots[j][i / 3][i % 3]);
+        let p = pod(a.as_ref(), opts).map_err(|e| TactileError::Input(format!("POD: {e}")))?;
+        let r = p.rank();
+        let mut modes = vec![0.0; 3 * n * r];
+        for i in 0..3 * n {
+            for j in 0..r {
+                modes[i * r + j] = p.modes[(i, j)];
+            }
+        }
+        let stiffness = reduced_stiffness(gel, &modes, r)?;
+        Ok(ReducedModel {
+            info: ReducedInfo {
+                format: FORMAT.into(),
+                mesh: mesh.into(),
+                mesh_nodes: n,
+                rank: r,
+                material: [gel.material.young_pa, gel.material.poisson],
+                snapshots: snapshots.len(),
+                sources,
+                captured_energy: p.captured_energy(),
+            },
+            modes,
+            stiffness,
+            singular_values: p.singular_values,
+        })
+    }
+
+    /// The first `rank` modes of this model (POD modes are nested), with their stiffness.
+    pub fn truncated(&self, rank: usize) -> Result<Self> {
+        let r = self.rank();
+        if rank == 0 || rank > r {
+            return Err(TactileError::Input(format!(
+                "rank {rank} is not within 1..={r} of the reduced model"
+            )));
+        }
+        let rows = self.modes.len() / r;
+        let mut modes = Vec::with_capacity(rows * rank);
+        for i in 0..rows {
+            modes.extend_from_slice(&self.modes[i * r..i * r + rank]);
+        }
+        let mut info = self.info.clone();
+        info.rank = rank;
+        Ok(ReducedModel {
+            info,
+            modes,
+            stiffness: self.stiffness.view((0, 0), (rank, rank)).into_owned(),
+            singular_values: self.singular_values.clone(),
+        })
+    }
+
+    /// Displacement of node `i` for reduced coordinates `q`, m.
+    pub fn node_displacement(&self, i: usize, q: &[f64]) -> [f64; 3] {
+        let r = self.rank();
+        let mut u = [0.0; 3];
+        for d in 0..3 {
+            let row = &self.modes[(3 * i + d) * r..(3 * i + d + 1) * r];
+            u[d] = row.iter().zip(q).map(|(a, b)| a * b).sum();
+        }
+        u
+    }
+
+    /// Displacement of the listed nodes for `q`, m.
+    pub fn displacement_of(&self, nodes: &[usize], q: &[f64]) -> Vec<[f64; 3]> {
+        nodes
+            .iter()
+            .map(|&i| self.node_displacement(i, q))
+            .collect()
+    }
+
+    /// Displacement of every node for `q`, m.
+    pub fn displacement(&self, q: &[f64]) -> Vec<[f64; 3]> {
+        (0..self.info.mesh_nodes)
+            .map(|i| self.node_displacement(i, q))
+            .collect()
+    }
+
+    /// Least-squares reduced coordinates of a full field (Phi^T u, the modes being orthonormal).
+    pub fn project(&self, u: &[[f64; 3]]) -> Vec<f64> {
+        let r = self.rank();
+        let mut q = vec![0.0; r];
+        for (i, ui) in u.iter().enumerate() {
+            for d in 0..3 {
+                let row = &self.modes[(3 * i + d) * r..(3 * i + d + 1) * r];
+                for j in 0..r {
+                    q[j] += row[j] * ui[d];
+                }
+            }
+        }
+        q
+    }
+
+    /// Writes `rom.json`, `modes.npy` (3N x r), `stiffness.npy` (r x r, N/m) and
+    /// `singular_values.npy` into `dir`.
+    pub fn save(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).map_err(|e| TactileError::io(dir, e))?;
+        let r = self.rank();
+        let rows = self.modes.len() / r;
+        ocm_fem::npy::write_f64_2d_path(dir.join("modes.npy"), &self.modes, rows, r)?;
+        let k: Vec<f64> = (0..r)
+            .flat_map(|i| (0..r).map(move |j| (i, j)))
+            .map(|(i, j)| self.stiffness[(i, j)])
+            .collect();
+        ocm_fem::npy::write_f64_2d_path(dir.join("stiffness.npy"), &k, r, r)?;
+        let s = &self.singular_values;
+        ocm_fem::npy::write_f64_2d_path(dir.join("singular_values.npy"), s, s.len(), 1)?;
+        let path = dir.join("rom.json");
+        let text = serde_json::to_string_pretty(&self.info)
+            .map_err(|e| TactileError::Input(format!("rom.json: {e}")))?;
+        std::fs::write(&path, text).map_err(|e| TactileError::io(&path, e))
+    }
+
+    /// Reads a model written by [`ReducedModel::save`]; shapes that disagree with `rom.json`
+    /// are errors naming the file.
+    pub fn load(dir: &Path) -> Result<Self> {
+        let path = dir.join("rom.json");
+        let text = std::fs::read_to_string(&path).map_err(|e| TactileError::io(&path, e))?;
+        let info: ReducedInfo = serde_json::from_str(&text)
+            .map_err(|e| TactileError::Input(format!("{}: {e}", path.display())))?;
+        if info.format != FORMAT {
+            return Err(TactileError::Input(format!(
+                "{}: format '{}', expected '{FORMAT}'",
+                path.display(),
+                info.format
+            )));
+        }
+        let r = info.rank;
+        let read = |name: &str, rows: usize, cols: usize| -> Result<Vec<f64>> {
+            let p = dir.join(name);
+            let a = ocm_fem::npy::read_f64_2d(&p)?;
+            if a.rows != rows || a.cols != cols {
+                return Err(TactileError::Input(format!(
+                    "{}: {} x {}, rom.json says {rows} x {cols}",
+                    p.display(),
+                    a.rows,
+                    a.cols
+                )));
+            }
+            if let Some(k) = a.data.iter().position(|v| !v.is_finite()) {
+                return Err(TactileError::Input(format!(
+                    "{}: entry {k} is not finite",
+                    p.display()
+                )));
+            }
+            Ok(a.data)
+        };
+        let modes = read("modes.npy", 3 * info.mesh_nodes, r)?;
+        let k = read("stiffness.npy", r, r)?;
+        let sv = ocm_fem::npy::read_f64_2d(dir.join("singular_values.npy"))?.data;
+        Ok(ReducedModel {
+            info,
+            modes,
+            stiffness: DMatrix::from_row_slice(r, r, &k),
+            singular_values: sv,
+        })
+    }
+
+    /// Checks that this model belongs to `gel` (node count and rest stiffness are not compared;
+    /// the node count is).
+    pub fn check_gel(&self, gel: &Gel) -> Result<()> {
+        if self.info.mesh_nodes != gel.num_nodes() {
+            return Err(TactileError::Input(format!(
+                "the reduced model was built on {} ({} nodes), the gel has {} nodes",
+                self.info.mesh,
+                self.info.mesh_nodes,
+                gel.num_nodes()
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Phi^T K_0 Phi from the fem tangent at rest (symmetrised against round-off).
+fn reduced_stiffness(gel: &Gel, modes: &[f64], r: usize) -> Result<DMatrix<f64>> {
+    let pattern = Pattern::new(&gel.model)?;
+    let x0 = gel.model.rest_dofs();
+    let ev = gel
+        .model
+        .evaluate(&pattern, &x0, &Loads::default(), 1.0, true)?;
+    let vals = ev
+        .tangent
+        .ok_or_else(|| TactileError::Input("the fem returned no tangent at rest".into()))?;
+    let free = &pattern.dof_of;
+    let cols: Vec<Vec<f64>> = (0..r)
+        .into_par_iter()
+        .map(|j| {
+            let v: Vec<f64> = free.iter().map(|&d| modes[d * r + j]).collect();
+            ocm_fem::solve::spmv(&pattern, &vals, &v)
+        })
+        .collect();
+    let mut k = DMatrix::zeros(r, r);
+    for (j, kv) in cols.iter().enumerate() {
+        for a in 0..r {
+            k[(a, j)] = free
+                .iter()
+                .zip(kv)
+                .map(|(&d, y)| modes[d * r + a] * y)
+                .sum();
+        }
+    }
+    Ok((&k + k.transpose()) * 0.5)
+}
+
+/// Controls of the reduced contact solve.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ReducedOptions {
+    /// Normal penalty per unit area, Pa/m (as the full model's [`crate::contact::ContactParams`]).
+    pub normal_penalty_pa_m: f64,
+    /// Penetration accepted at equilibrium, m.
+    pub penetration_tol_m: f64,
+    /// Augmented-Lagrangian updates per frame.
+    pub max_updates: usize,
+    /// Linearisation passes per solve.
+    pub max_passes: usize,
+    /// A pass has settled when |dq| <= this fraction of |q|.
+    pub settle: f64,
+    /// Nodes whose signed distance is surely above this are not queried, m.
+    pub reach_m: f64,
+}
+
+impl ReducedOptions {
+    /// For modulus `young_pa`: 1/100 of the full model's normal penalty and no multiplier
+    /// updates. The subspace cannot follow every contact node onto the indenter (sharp
+    /// features, the basis' projection error), and a stiff penalty then bends the whole field
+    /// to chase them: on held-out set-ups the nodal RMSE was 0.13 mm at the full model's penalty,
+    /// 0.067 at 1/10, 0.027 at 1/100 and 0.026 at 1/1000 against a projection limit of 0.025
+    /// (README, "Reduced model").
+    pub fn for_modulus(young_pa: f64) -> Self {
+        let c = crate::contact::ContactParams::for_modulus(young_pa);
+        ReducedOptions {
+            normal_penalty_pa_m: 0.01 * c.normal_penalty_pa_m,
+            penetration_tol_m: c.penetration_tol_m,
+            max_updates: 0,
+            max_passes: 8,
+            settle: 1e-4,
+            reach_m: 0.1e-3,
+        }
+    }
+}
+
+/// One solved frame of the reduced model.
+#[derive(Debug, Clone)]
+pub struct ReducedFrame {
+    /// Indentation depth, m.
+    pub depth_m: f64,
+    /// Reduced coordinates.
+    pub q: Vec<f64>,
+    /// Nodes in contact: (mesh node, normal force N, indenter normal).
+    pub active: Vec<(usize, f64, Vector3<f64>)>,
+    /// Force of the gel on the indenter, N.
+    pub indenter_force_n: [f64; 3],
+    /// Deepest penetration at the frame (linearised gaps), m.
+    pub max_penetration_m: f64,
+    /// Linearisation passes over all multiplier updates.
+    pub passes: usize,
+    /// Signed-distance queries made.
+    pub queries: usize,
+}
+
+impl ReducedFrame {
+    /// Contact force on each listed node (zero off contact), N.
+    pub fn nodal_force(&self, nodes: &[usize], num_nodes: usize) -> Vec<[f64; 3]> {
+        let mut local = vec![usize::MAX; num_nodes];
+        for (k, &i) in nodes.iter().enumerate() {
+            local[i] = k;
+        }
+        let mut f = vec![[0.0; 3]; nodes.len()];
+        for (i, p, n) in &self.active {
+            if local[*i] != usize::MAX {
+                f[local[*i]] = [p * n.x, p * n.y, p * n.z];
+            }
+        }
+        f
+    }
+}
+
+/// Per surface node: where and what its signed distance was last queried.
+#[derive(Debug, Clone, Copy)]
+struct Seen {
+    gap: f64,
+    normal: Vector3<f64>,
+    at: Vector3<f64>,
+    indenter_at: Vector3<f64>,
+}
+
+/// A stepwise indentation on the reduced model.
+pub struct ReducedIndentation<'a> {
+    model: &'a ReducedModel,
+    gel: &'a Gel,
+    indenter: &'a Indenter,
+    approach: Approach,
+    /// Reduced coordinates.
+    pub q: DVector<f64>,
+    lambda: Vec<f64>,
+    seen: Vec<Option<Seen>>,
+    /// Controls.
+    pub options: ReducedOptions,
+    /// Current depth, m.
+    pub depth_m: f64,
+}
+
+impl<'a> ReducedIndentation<'a> {
+    /// Prepares the indentation of `gel` (reduced by `model`) by `indenter` at `placement`;
+    /// errors when it would not touch the top face or the model is of another mesh.
+    pub fn new(
+        name: &str,
+        model: &'a ReducedModel,
+        gel: &'a Gel,
+        indenter: &'a Indenter,
+        placement: Placement,
+        options: ReducedOptions,
+    ) -> Result<Self> {
+        model.check_gel(gel)?;
+        let approach = Approach::new(name, gel, indenter, placement)?;
+        Ok(ReducedIndentation {
+            model,
+            gel,
+            indenter,
+            approach,
+            q: DVector::zeros(model.rank()),
+            lambda: vec![0.0; gel.surface.len()],
+            seen: vec![None; gel.surface.len()],
+            options,
+            depth_m: 0.0,
+        })
+    }
+
+    /// Pose of the indenter at `depth_m` from first touch.
+    pub fn pose_at(&self, depth_m: f64) -> Pose {
+        self.approach.pose_at(depth_m)
+    }
+
+    /// Solves the frame at `depth_m` (warm-started from the current state).
+    pub fn advance_to(&mut self, depth_m: f64) -> Result<ReducedFrame> {
+        if !depth_m.is_finite() {
+            return Err(TactileError::Input(format!(
+                "reduced indentation depth {depth_m} m is not finite"
+            )));
+        }
+        let pose = self.approach.pose_at(depth_m);
+        let placed = Placed {
+            indenter: self.indenter,
+            pose,
+        };
+        let (lo, hi) = placed.bounds();
+        let margin = 0.5e-3;
+        let gel = self.gel;
+        // Surface nodes displaced by at most ~the depth: a 1.5 mm margin in z keeps every node
+        // that can touch.
+        let cands: Vec<usize> = gel
+            .surface
+            .iter()
+            .enumerate()
+            .filter(|&(_, &i)| {
+                let p = gel.mesh.points[i];
+                p[0] >= lo[0] - margin
+                    && p[0] <= hi[0] + margin
+                    && p[1] >= lo[1] - margin
+                    && p[1] <= hi[1] + margin
+                    && p[2] >= lo[2] - 1.5e-3
+            })
+            .map(|(k, _)| k)
+            .collect();
+        let o = self.options;
+        let r = self.model.rank();
+        let mut passes = 0;
+        let mut queries = 0;
+        let mut pen = 0.0;
+        let mut active: Vec<(usize, f64, Vector3<f64>)> = Vec::new();
+        for update in 0..=o.max_updates {
+            let mut settled = false;
+            // Passes that stop shrinking their step are damped: near sharp indenter features
+            // the linearised normals can flip between passes.
+            let (mut alpha, mut last_dq) = (1.0, f64::INFINITY);
+            let mut near: Vec<(usize, f64, DVector<f64>)> = Vec::new();
+            while !settled && passes < o.max_passes * (update + 1) {
+                passes += 1;
+                queries += self.query(&placed, &cands);
+                // a_i = Phi_i^T n_i for the nodes within reach.
+                near.clear();
+                for &k in &cands {
+                    let Some(s) = self.seen[k] else { continue };
+                    let i = gel.surface[k];
+                    let x = self.position(i);
+                    let g = s.gap + s.normal.dot(&(x - s.at))
+                        - s.normal.dot(&(pose.translation - s.indenter_at));
+                    if g > o.reach_m && self.lambda[k] == 0.0 {
+                        continue;
+                    }
+                    let mut a = DVector::zeros(r);
+                    for d in 0..3 {
+                        let row = &self.model.modes[(3 * i + d) * r..(3 * i + d + 1) * r];
+                        for j in 0..r {
+                            a[j] += row[j] * s.normal[d];
+                        }
+                    }
+                    // Linearised gap at the current q: g_i + a_i . (q' - q).
+                    near.push((k, g - a.dot(&self.q), a));
+                }
+                let q_new = self.active_set_solve(&near)?;
+                let dq = (&q_new - &self.q).norm();
+                settled = dq <= o.settle * q_new.norm().max(1e-30);
+                if dq > 0.9 * last_dq {
+                    alpha = (alpha * 0.5f64).max(1.0 / 16.0);
+                }
+                last_dq = dq;
+                self.q = &self.q + (q_new - &self.q) * alpha;
+            }
+            // Pressures and penetration at the settled q (linearised gaps).
+            active.clear();
+            pen = 0.0f64;
+            for (k, g0, a) in &near {
+                let g = g0 + a.dot(&self.q);
+                let kn = o.normal_penalty_pa_m * gel.area_m2[*k];
+                let p = self.lambda[*k] - kn * g;
+                if p > 0.0 {
+                    pen = pen.max(-g);
+                    let n = self.seen[*k].map(|s| s.normal).unwrap_or_else(Vector3::z);
+                    active.push((gel.surface[*k], p, n));
+                }
+            }
+            if pen <= o.penetration_tol_m || update == o.max_updates {
+                break;
+            }
+            let updated: Vec<(usize, f64)> = near
+                .iter()
+                .map(|(k, g0, a)| {
+                    let kn = o.normal_penalty_pa_m * gel.area_m2[*k];
+                    (*k, (self.lambda[*k] - kn * (g0 + a.dot(&self.q))).max(0.0))
+                })
+                .collect();
+            self.lambda.iter_mut().for_each(|h| *h = 0.0);
+            for (k, p) in updated {
+                self.lambda[k] = p;
+            }
+        }
+        self.depth_m = depth_m;
+        let mut total = Vector3::zeros();
+        for (_, p, n) in &active {
+            total -= n * *p;
+        }
+        Ok(ReducedFrame {
+            depth_m,
+            q: self.q.iter().copied().collect(),
+            active,
+            indenter_force_n: [total.x, total.y, total.z],
+            max_penetration_m: pen.max(0.0),
+            passes,
+            queries,
+        })
+    }
+
+    fn position(&self, i: usize) -> Vector3<f64> {
+        let u = self.model.node_displacement(i, self.q.as_slice());
+        Vector3::from(self.gel.mesh.points[i]) + Vector3::from(u)
+    }
+
+    /// Queries the candidates whose distance bound says they may be within reach; returns how
+    /// many were queried.
+    fn query(&mut self, placed: &Placed, cands: &[usize]) -> usize {
+        let t = placed.pose.translation;
+        let reach = self.options.reach_m;
+        let todo: Vec<(usize, Vector3<f64>)> = cands
+            .iter()
+            .filter_map(|&k| {
+                let x = self.position(self.gel.surface[k]);
+                let needed = match self.seen[k] {
+                    None => true,
+                    Some(s) => s.gap - (x - s.at).norm() - (t - s.indenter_at).norm() <= reach,
+                };
+                needed.then_some((k, x))
+            })
+            .collect();
+        let found: Vec<(usize, Seen)> = todo
+            .par_iter()
+            .with_min_len(64)
+            .map(|&(k, x)| {
+                let q = placed.query(&x);
+                (
+                    k,
+                    Seen {
+                        gap: q.distance,
+                        normal: q.normal,
+                        at: x,
+                        indenter_at: t,
+                    },
+                )
+            })
+            .collect();
+        for (k, s) in found {
+            self.seen[k] = Some(s);
+        }
+        todo.len()
+    }
+
+    /// The exact minimiser of the penalty problem with linearised gaps g0_i + a_i . q:
+    /// semismooth Newton on the active set (each step one r x r Cholesky).
+    fn active_set_solve(&self, near: &[(usize, f64, DVector<f64>)]) -> Result<DVector<f64>> {
+        let o = &self.options;
+        let r = self.model.rank();
+        let kn = |k: usize| o.normal_penalty_pa_m * self.gel.area_m2[k];
+        let mut q = self.q.clone();
+        let mut last: Option<Vec<bool>> = None;
+        for _ in 0..50 {
+            let act: Vec<bool> = near
+                .iter()
+                .map(|(k, g0, a)| self.lambda[*k] - kn(*k) * (g0 + a.dot(&q)) > 0.0)
+                .collect();
+            if last.as_ref() == Some(&act) {
+                return Ok(q);
+            }
+            let m = act.iter().filter(|&&b| b).count();
+            // H = K_r + A^T A with the rows sqrt(k_i) a_i of the active nodes (one GEMM).
+            let mut rows = DMatrix::zeros(m, r);
+            let mut rhs = DVector::zeros(r);
+            let mut at = 0;
+            for ((k, g0, a), on) in near.iter().zip(&act) {
+                if !on {
+                    continue;
+                }
+                let kk = kn(*k);
+                let s = kk.sqrt();
+                for j in 0..r {
+                    rows[(at, j)] = s * a[j];
+                }
+                rhs.axpy(self.lambda[*k] - kk * g0, a, 1.0);
+                at += 1;
+            }
+            let h = &self.model.stiffness + rows.tr_mul(&rows);
+            let chol = h.cholesky().ok_or_else(|| {
+                TactileError::Input(
+                    "the reduced stiffness is not positive definite (a degenerate basis?)".into(),
+                )
+            })?;
+            q = chol.solve(&rhs);
+            last = Some(act);
+        }
+        Err(TactileError::Input(format!(
+            "the reduced contact active set did not settle in 50 iterations at depth {:.4} mm",
+            self.depth_m * 1e3
+        )))
+    }
+}
+
+/// A full-FEM indentation read back from its folder (as `ocm tactile indent` and the dataset's
+/// FEM cache write it): depths from `force_depth.csv`, fields from `u_NNN.npy`.
+#[derive(Debug, Clone)]
+pub struct FemSequence {
+    /// Depth of each step, m.
+    pub depth_m: Vec<f64>,
+    /// Nodal displacement of each step (N x 3), m.
+    pub displacement: Vec<Vec<[f64; 3]>>,
+    /// Force of the gel on the indenter at each step, N.
+    pub force_n: Vec<[f64; 3]>,
+}
+
+impl FemSequence {
+    /// Reads the consecutive steps from 1 in `dir` (at most as many as `force_depth.csv` lists).
+    /// A run that stopped before writing `force_depth.csv` is read with step k at depth
+    /// k `step_m` and the force from `f_NNN.npy` when `step_m` is given.
+    pub fn read(dir: &Path, nodes: usize, step_m: Option<f64>) -> Result<Self> {
+        let csv_path = dir.join("force_depth.csv");
+        let csv = match (std::fs::read_to_string(&csv_path), step_m) {
+            (Ok(c), _) => c,
+            (Err(_), Some(h)) => Self::synthetic_csv(dir, nodes, h)?,
+            (Err(e), None) => return Err(TactileError::io(&csv_path, e)),
+        };
+        let mut seq = FemSequence {
+            depth_m: Vec::new(),
+            displacement: Vec::new(),
+            force_n: Vec::new(),
+        };
+        for (k, line) in csv.lines().skip(1).enumerate() {
+            let p = dir.join(format!("u_{:03}.npy", k + 1));
+            if !p.exists() {
+                break;
+            }
+            let cols: Vec<f64> = line
+                .split(',')
+                .take(5)
+                .map(|v| v.trim().parse().unwrap_or(f64::NAN))
+                .collect();
+            if cols.len() < 5 || cols.iter().any(|v| !v.is_finite()) {
+                return Err(TactileError::Input(format!(
+                    "{} line {}: expected step, depth_mm and three forces",
+                    csv_path.display(),
+                    k + 2
+                )));
+            }
+            let a = ocm_fem::npy::read_f64_2d(&p)?;
+            if a.rows != nodes || a.cols != 3 {
+                return Err(TactileError::Input(format!(
+                    "{} is {} x {}, expected {nodes} x 3 (another mesh?)",
+                    p.display(),
+                    a.rows,
+                    a.cols
+                )));
+            }
+            seq.depth_m.push(cols[1] * 1e-3);
+            seq.force_n.push([cols[2], cols[3], cols[4]]);
+            seq.displacement
+                .push(a.data.chunks(3).map(|c| [c[0], c[1], c[2]]).collect());
+        }
+        Ok(seq)
+    }
+
+    /// The rows `step,depth_mm,fx,fy,fz` of a run without its CSV: depths k `step_m`, the
+    /// force on the indenter minus the sum of `f_NNN.npy`.
+    fn synthetic_csv(dir: &Path, nodes: usize, step_m: f64) -> Result<String> {
+        let mut csv = String::from("step,depth_mm,force_x_n,force_y_n,force_z_n\n");
+        for k in 1.. {
+            let p = dir.join(format!("f_{k:03}.npy"));
+            if !p.exists() {
+                break;
+            }
+            let a = ocm_fem::npy::read_f64_2d(&p)?;
+            if a.rows != nodes || a.cols != 3 {
+                return Err(TactileError::Input(format!(
+                    "{} is {} x {}, expected {nodes} x 3",
+                    p.display(),
+                    a.rows,
+                    a.cols
+                )));
+            }
+            let mut t = [0.0; 3];
+            for c in a.data.chunks(3) {
+                for d in 0..3 {
+                    t[d] -= c[d];
+                }
+            }
+            csv += &format!(
+                "{k},{},{},{},{}\n",
+                k as f64 * step_m * 1e3,
+                t[0],
+                t[1],
+                t[2]
+            );
+        }
+        Ok(csv)
+    }
+}
+
+/// The reduced model against one full-FEM sequence.
+#[derive(Debug, Clone, Serialize)]
+pub struct SequenceScore {
+    /// Set-up name.
+    pub setup: String,
+    /// Frames compared.
+    pub frames: usize,
+    /// Nodal RMSE over all nodes per frame, m.
+    pub rmse_m: Vec<f64>,
+    /// Nodal RMSE over the top-face nodes per frame, m.
+    pub rmse_top_m: Vec<f64>,
+    /// The basis' own limit: RMSE of the FEM field's projection onto the modes, m.
+    pub projection_rmse_m: Vec<f64>,
+    /// Indenter force z, reduced and FEM, N.
+    pub force_z_n: Vec<[f64; 2]>,
+    /// Deepest penetration over the frames, m.
+    pub max_penetration_m: f64,
+    /// Linearisation passes over the frames of the last run.
+    pub passes: usize,
+    /// Signed-distance queries over the frames of the last run.
+    pub queries: usize,
+    /// Seconds of each timed repeat of the whole sequence (solve and top-face field).
+    pub seconds: Vec<f64>,
+}
+
+/// Runs the reduced model through the depths of `fem` (`repeats` timed runs from rest, each
+/// solving every frame and evaluating the top-face field), then scores the last run's fields
+/// against the FEM.
+pub fn score_sequence(
+    model: &ReducedModel,
+    gel: &Gel,
+    setup: &crate::setup::Setup,
+    fem: &FemSequence,
+    options: ReducedOptions,
+    repeats: usize,
+) -> Result<SequenceScore> {
+    let indenter = Indenter::from_stl(&setup.stl)?;
+    let mut seconds = Vec::new();
+    let mut frames = Vec::new();
+    for _ in 0..repeats.max(1) {
+        let mut run =
+            ReducedIndentation::new(&setup.name, model, gel, &indenter, setup.placement, options)?;
+        let t0 = std::time::Instant::now();
+        frames.clear();
+        for &d in &fem.depth_m {
+            let f = run.advance_to(d)?;
+            let top = model.displacement_of(&gel.top, &f.q);
+            std::hint::black_box(&top);
+            frames.push(f);
+        }
+        seconds.push(t0.elapsed().as_secs_f64());
+    }
+    let mut s = SequenceScore {
+        setup: setup.name.clone(),
+        frames: frames.len(),
+        rmse_m: Vec::new(),
+        rmse_top_m: Vec::new(),
+        projection_rmse_m: Vec::new(),
+        force_z_n: Vec::new(),
+        max_penetration_m: frames
+            .iter()
+            .map(|f| f.max_penetration_m)
+            .fold(0.0, f64::max),
+        passes: frames.iter().map(|f| f.passes).sum(),
+        queries: frames.iter().map(|f| f.queries).sum(),
+        seconds,
+    };
+    for ((f, u), force) in frames.iter().zip(&fem.displacement).zip(&fem.force_n) {
+        let ur = model.displacement(&f.q);
+        s.rmse_m.push(crate::metrics::nodal_rmse(&ur, u)?);
+        let top_r: Vec<[f64; 3]> = gel.top.iter().map(|&i| ur[i]).collect();
+        let top_f: Vec<[f64; 3]> = gel.top.iter().map(|&i| u[i]).collect();
+        s.rmse_top_m
+            .push(crate::metrics::nodal_rmse(&top_r, &top_f)?);
+        let up = model.displacement(&model.project(u));
+        s.projection_rmse_m
+            .push(crate::metrics::nodal_rmse(&up, u)?);
+        s.force_z_n.push([f.indenter_force_n[2], force[2]]);
+    }
+    Ok(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gel::GelMaterial;
+    use crate::indent::{IndentOptions, Indentation};
+    use ocm_mor::pod::Truncation;
+
+    /// A 6 x 4 x 2 mm block of tets, base fixed, top at z = 2 mm.
+    fn block() -> Gel {
+        let mesh = ocm_fem::mesh::generate::box_mesh([12, 8, 4], [6e-3, 4e-3, 2e-3]);
+        Gel::from_mesh(mesh, GelMaterial::default(), 1e-9).unwrap()
+    }
+
+    fn place(x: f64, y: f64) -> Placement {
+        Placement {
+            xy_m: [x, y],
+            euler_deg: [0.0; 3],
+        }
+    }
+
+    /// The full FEM of a sphere pressed 8 x 25 um at `p`.
+    fn fem(gel: &Gel, ind: &Indenter, p: Placement) -> (Vec<f64>, Vec<Vec<[f64; 3]>>, Vec<f64>) {
+        let mut o = IndentOptions::protocol(gel.material.young_pa);
+        o.steps = 8;
+        o.step_m = 25e-6;
+        let mut run = Indentation::new("fem", gel, ind, p, o).unwrap();
+        let out = run.run(|_| {}).unwrap();
+        (
+            out.iter().map(|s| s.depth_m).collect(),
+            out.iter().map(|s| s.displacement.clone()).collect(),
+            out.iter().map(|s| s.indenter_force_n[2]).collect(),
+        )
+    }
+
+    /// Built from the FEM of one placement with all its snapshots as modes, the reduced solve
+    /// at that placement reproduces the FEM: the linearisation at rest and the discrete
+    /// contact cost a few per cent of the field; the stiffness is Phi^T K Phi (checked against
+    /// the energy of a mode), the model survives a save/load round trip, and without contact
+    /// it stays at rest.
+    #[test]
+    fn reduced_solve_reproduces_its_fem() {
+        let gel = block();
+        let ind = crate::shapes::sphere(1.5e-3, 32).unwrap();
+        let p = place(3e-3, 2e-3);
+        let (depths, fields, force) = fem(&gel, &ind, p);
+        let opts = PodOptions {
+            truncation: Truncation::Rank(8),
+            oversampling: 4,
+            power_iterations: 2,
+            seed: 3,
+        };
+        let m = ReducedModel::build(&gel, "block", &fields, vec!["fem".into()], &opts).unwrap();
+        assert_eq!(m.rank(), 8);
+        // Mode 0's stiffness entry equals twice the strain energy of a small multiple of it
+        // (central difference of the fem's energy).
+        let h = 1e-7;
+        let pattern = Pattern::new(&gel.model).unwrap();
+        let energy = |t: f64| {
+            let mut x = gel.model.rest_dofs();
+            for (i, v) in x.iter_mut().enumerate() {
+                *v += t * m.modes[i * 8];
+            }
+            gel.model
+                .evaluate(&pattern, &x, &Loads::default(), 1.0, false)
+                .unwrap()
+                .strain_energy
+        };
+        let k00 = (energy(h) - 2.0 * energy(0.0) + energy(-h)) / (h * h);
+        assert!(
+            (k00 - m.stiffness[(0, 0)]).abs() < 1e-3 * k00,
+            "{k00} vs {}",
+            m.stiffness[(0, 0)]
+        );
+        let dir = std::env::temp_dir().join(format!("ocm-reduced-{}", std::process::id()));
+        m.save(&dir).unwrap();
+        let back = ReducedModel::load(&dir).unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        assert_eq!(back.info, m.info);
+        assert_eq!(back.modes, m.modes);
+        // With the full model's stiff penalty: the basis holds this set-up's fields exactly.
+        let mut ro = ReducedOptions::for_modulus(gel.material.young_pa);
+        ro.normal_penalty_pa_m =
+            crate::contact::ContactParams::for_modulus(gel.material.young_pa).normal_penalty_pa_m;
+        let mut run = ReducedIndentation::new("rom", &back, &gel, &ind, p, ro).unwrap();
+        let umax = fields
+            .last()
+            .unwrap()
+            .iter()
+            .map(|u| u[2].abs())
+            .fold(0.0, f64::max);
+        for ((d, u), f) in depths.iter().zip(&fields).zip(&force) {
+            let fr = run.advance_to(*d).unwrap();
+            let e = crate::metrics::nodal_rmse(&back.displacement(&fr.q), u).unwrap();
+            let rms = crate::metrics::nodal_rmse(u, &vec![[0.0; 3]; u.len()]).unwrap();
+            println!(
+                "depth {:.3} mm: RMSE {:.2} um of a {:.2} um field; force {:.4} vs FEM {:.4} N",
+                d * 1e3,
+                e * 1e6,
+                rms * 1e6,
+                fr.indenter_force_n[2],
+                f
+            );
+            assert!(e < 0.1 * rms, "depth {d}: RMSE {e} vs field {rms}");
+            assert!((fr.indenter_force_n[2] - f).abs() < 0.1 * f.abs());
+        }
+        assert!(umax > 150e-6);
+        // Lifted 1 mm off the gel: no contact, no displacement.
+        let mut off = ReducedIndentation::new("off", &back, &gel, &ind, p, ro).unwrap();
+        let fr = off.advance_to(-1e-3).unwrap();
+        assert!(fr.active.is_empty());
+        assert!(fr.q.iter().all(|&v| v == 0.0));
+    }
+}
