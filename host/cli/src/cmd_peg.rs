@@ -574,15 +574,11 @@ fn render_images(
     every: usize,
 ) -> anyhow::Result<Vec<PathBuf>> {
     use ocm_tactile::gel::{Gel, GelMaterial};
-    use ocm_tactile::optics::{PolyCalib, Renderer, RgbImage};
-    use ocm_tactile::real::{COLS, ROWS};
     let digit = ocm_datadir::data_file(data, "digit")?;
     let gel = Gel::digit(digit.join(mesh), GelMaterial::default())?;
-    let calib = PolyCalib::from_npz(digit.join("optics/taxim_polycalib.npz"))?;
-    let bg = RgbImage::read_sized(digit.join("real-frames-edge6/edge6_00.jpg"), ROWS, COLS)?;
-    let imager =
-        ocm_peg::images::TactileImager::new(&gel, Renderer::new(calib, &bg)?, &npe.npe().surface)
-            .with_context(|| format!("the engine and the mesh {mesh}"))?;
+    let renderer = ocm_tactile::real::default_renderer(&digit)?;
+    let imager = ocm_peg::images::TactileImager::new(&gel, renderer, &npe.npe().surface)
+        .with_context(|| format!("the engine and the mesh {mesh}"))?;
     let pb = bar(0, "tactile images");
     let written = ocm_peg::images::write_images(dir, fields, &imager, every, &mut |k, n| {
         pb.set_length(n as u64);

@@ -629,11 +629,11 @@ fn render(a: RenderArgs) -> anyhow::Result<()> {
     let gel = Gel::digit(digit.join(mesh_file(a.mesh)), GelMaterial::default())?;
     let calib_path = a
         .calib
-        .unwrap_or_else(|| digit.join("optics/taxim_polycalib.npz"));
+        .unwrap_or_else(|| digit.join(ocm_tactile::real::DEFAULT_CALIB));
     let calib = PolyCalib::from_npz(&calib_path)?;
     let bg_path = a
         .background
-        .unwrap_or_else(|| digit.join("real-frames-edge6/edge6_00.jpg"));
+        .unwrap_or_else(|| digit.join(ocm_tactile::real::DEFAULT_BACKGROUND));
     let bg = RgbImage::read_sized(&bg_path, ROWS, COLS)?;
     let mut renderer = Renderer::new(calib, &bg)?;
     let map = match &a.map {
@@ -872,7 +872,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         fixed_fit,
         ..CompareOptions::default()
     };
-    let calib = PolyCalib::from_npz(digit.join("optics/taxim_polycalib.npz"))?;
+    let calib = PolyCalib::from_npz(digit.join(real::DEFAULT_CALIB))?;
     let mut renderer = Renderer::new(calib, &bg)?;
     let pb = bar(2, "compare-real");
     let c = real::compare(&gel, &fields, &frames, &mut renderer, &opts, &mut |stage| {

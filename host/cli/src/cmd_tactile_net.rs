@@ -8,8 +8,8 @@ use ocm_tactile::gel::{Gel, GelMaterial};
 use ocm_tactile::mask::Grid;
 use ocm_tactile::nets::pairs::{self, build_pairs_mirrored, delta_of, depth_image, downscale};
 use ocm_tactile::nets::{self, NetConfig, NetData, NetKind};
-use ocm_tactile::optics::{GridToMesh, PolyCalib, Renderer, RgbImage};
-use ocm_tactile::real::{COLS, ROWS, difference_image, side_by_side};
+use ocm_tactile::optics::{GridToMesh, RgbImage};
+use ocm_tactile::real::{self, COLS, ROWS, difference_image, side_by_side};
 use std::path::PathBuf;
 
 /// Which network to train.
@@ -108,9 +108,7 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
     let ds = Dataset::read(&a.dataset)
         .with_context(|| format!("reading the data set {}", a.dataset.display()))?;
     let (digit, gel) = digit_gel(a.data.as_deref(), &ds.manifest.mesh)?;
-    let calib = PolyCalib::from_npz(digit.join("optics/taxim_polycalib.npz"))?;
-    let bg = RgbImage::read_sized(digit.join("real-frames-edge6/edge6_00.jpg"), ROWS, COLS)?;
-    let renderer = Renderer::new(calib, &bg)?;
+    let renderer = real::default_renderer(&digit)?;
     let pairs = build_pairs_mirrored(&ds, &gel, &renderer, a.scale, a.mirror)?;
     let t_pairs = t0.elapsed().as_secs_f64();
     let kind = match a.net {
@@ -298,7 +296,7 @@ pub fn perceive(a: PerceiveArgs) -> anyhow::Result<()> {
     let (digit, gel) = digit_gel(a.data.as_deref(), "DIGIT_v8.vtk")?;
     let bg_path = a
         .background
-        .unwrap_or_else(|| digit.join("real-frames-edge6/edge6_00.jpg"));
+        .unwrap_or_else(|| digit.join(real::DEFAULT_BACKGROUND));
     let bg = downscale(&RgbImage::read_sized(&bg_path, ROWS, COLS)?, scale);
     let (map, r_img, c_img) = pairs::image_map(&gel, scale);
     anyhow::ensure!(

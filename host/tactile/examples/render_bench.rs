@@ -6,7 +6,7 @@ use ocm_tactile::gel::{Gel, GelMaterial};
 use ocm_tactile::mask::Grid;
 use ocm_tactile::optics::bench::bench_render;
 use ocm_tactile::optics::{CameraMap, PolyCalib, Renderer, RgbImage, SurfaceSampler};
-use ocm_tactile::real::{COLS, ROWS, read_cached_steps};
+use ocm_tactile::real::{COLS, DEFAULT_BACKGROUND, DEFAULT_CALIB, ROWS, read_cached_steps};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
@@ -22,8 +22,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let threads: usize = args.get(4).map_or(Ok(2), |s| s.parse())?;
     let digit = ocm_datadir::data_file(None, "digit")?;
     let gel = Gel::digit(digit.join(mesh), GelMaterial::default())?;
-    let calib = PolyCalib::from_npz(digit.join("optics/taxim_polycalib.npz"))?;
-    let bg = RgbImage::read_sized(digit.join("real-frames-edge6/edge6_00.jpg"), ROWS, COLS)?;
+    let calib = PolyCalib::from_npz(digit.join(DEFAULT_CALIB))?;
+    let bg = RgbImage::read_sized(digit.join(DEFAULT_BACKGROUND), ROWS, COLS)?;
     let sampler = SurfaceSampler::new(&gel, ROWS, COLS, &CameraMap::for_grid(&Grid::for_gel(&gel)));
     let mut steps = 0;
     while fields_dir.join(format!("u_{:03}.npy", steps + 1)).exists() {

@@ -17,6 +17,20 @@ pub const ROWS: usize = 240;
 /// Columns of the compared images.
 pub const COLS: usize = 320;
 
+/// The optical calibration used by default, relative to the `digit` data folder.
+pub const DEFAULT_CALIB: &str = "optics/taxim_polycalib.npz";
+/// The no-contact background used by default (frame 00 of the real edge sequence), relative to
+/// the `digit` data folder.
+pub const DEFAULT_BACKGROUND: &str = "real-frames-edge6/edge6_00.jpg";
+
+/// The renderer every tool starts from: the default calibration over the default background,
+/// at the real frames' size.
+pub fn default_renderer(digit: &Path) -> Result<Renderer> {
+    let calib = crate::optics::PolyCalib::from_npz(digit.join(DEFAULT_CALIB))?;
+    let bg = RgbImage::read_sized(digit.join(DEFAULT_BACKGROUND), ROWS, COLS)?;
+    Renderer::new(calib, &bg)
+}
+
 /// Reads `{prefix}_00.jpg`, `{prefix}_01.jpg`, ... from `dir` until the first missing number,
 /// at 240 x 320 (a 480 x 640 frame is averaged over 2 x 2 blocks). Frame 0 is the background.
 pub fn load_frames(dir: &Path, prefix: &str) -> Result<Vec<RgbImage>> {
