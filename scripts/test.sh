@@ -11,6 +11,9 @@ export OCM_PYTHON="$PWD/.venv/bin/python3"
 # takes (several GiB); a user who rebuilds often can set CARGO_INCREMENTAL=1.
 export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
 
+# Free disk is printed so that a link that dies for lack of space can be told from a bug.
+echo "== free disk: $(df -h --output=avail . | tail -1 | tr -d ' ') available"
+
 echo "== cargo fmt --check"
 cargo fmt --all -- --check
 
@@ -26,6 +29,7 @@ echo "== cargo test"
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 cargo test --workspace 2>&1 | tee "$log"
+echo "== build size: $(du -sh target 2>/dev/null | cut -f1), free disk: $(df -h --output=avail . | tail -1 | tr -d ' ')"
 # One closing line with the totals over every test binary.
 awk '/^test result:/ { for (i = 1; i <= NF; i++) { if ($(i+1) ~ /^passed/) p += $i; if ($(i+1) ~ /^failed/) f += $i } }
      END { printf "tests: %d passed, %d failed\n", p, f }' "$log"
