@@ -9,7 +9,7 @@ use indicatif::ProgressBar;
 use ocm_learn::TrainConfig;
 use ocm_rl::bc::{self, BcConfig};
 use ocm_rl::bench::{self, BenchConfig};
-use ocm_rl::env::{Env, EnvConfig, PHYSICS_DT_S};
+use ocm_rl::env::{Env, EnvConfig, PHYSICS_DT_S, Randomisation};
 use ocm_rl::eval::{EvalReport, evaluate, evaluate_episodes};
 use ocm_rl::policy::{Policy, PolicyMeta, policy_config};
 use ocm_rl::ppo::{self, PpoConfig, RlRecord};
@@ -124,6 +124,16 @@ pub enum RlCommand {
         /// action in the actor loss.
         #[arg(long, default_value_t = 0.0)]
         bc_weight: f64,
+        /// PPO: learn a bounded residual correction on this policy checkpoint (a BC
+        /// policy.ckpt) instead of a policy; it starts at exactly that policy.
+        #[arg(long)]
+        residual_on: Option<PathBuf>,
+        /// PPO with --residual-on: largest correction per action value, action units.
+        #[arg(long, default_value_t = 0.1)]
+        residual_scale: f64,
+        /// Per-episode plant perturbations during training and the final evaluation.
+        #[command(flatten)]
+        random: RandomArgs,
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
@@ -157,6 +167,9 @@ pub enum RlCommand {
         /// Deployment (transfer) settings.
         #[command(flatten)]
         deploy: DeployArgs,
+        /// Per-episode plant perturbations (the surrogate environment only).
+        #[command(flatten)]
+        random: RandomArgs,
     },
     /// Environment steps per second (single and vectorised) and policy inference rate, medians.
     Bench {
@@ -206,6 +219,43 @@ pub enum PathArg {
     Task,
     /// The unseen figure-eight on a curved surface with 1 N (Fig 4.26-A; scored as Task 3).
     FigureEight,
+}
+
+/// Per-episode perturbations of the surrogate plant that the expert and BC do not know, each
+/// uniform in +- the given half-width and drawn from the episode's seed.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct RandomArgs {
+    /// Bias of each grouped bending command, mrad.
+    #[arg(long, default_value_t = 0.0)]
+    bend_bias_mrad: f64,
+    /// Bias of the grouped extension command, mm.
+    #[arg(long, default_value_t = 0.0)]
+    extension_bias_mm: f64,
+    /// Shift of the contact surface along its normal (towards the robot positive), mm; the
+    /// targets stay on the nominal surface.
+    #[arg(long, default_value_t = 0.0)]
+    surface_offset_mm: f64,
+}
+
+impl RandomArgs {
+    fn config(&self, task: TaskKind) -> EnvConfig {
+        EnvConfig {
+            randomisation: Randomisation {
+                bend_bias_rad: self.bend_bias_mrad * 1e-3,
+                extension_bias_m: self.extension_bias_mm * 1e-3,
+                surface_offset_m: self.surface_offset_mm * 1e-3,
+            },
+            ..EnvConfig::new(task)
+        }
+    }
+
+    fn json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "bend_bias_mrad": self.bend_bias_mrad,
+            "extension_bias_mm": self.extension_bias_mm,
+            "surface_offset_mm": self.surface_offset_mm,
+        })
+    }
 }
 
 /// Settings of `ocm rl eval` beyond the surrogate environment.
@@ -507,6 +557,9 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
             critic_warmup,
             pretrain_steps,
             bc_weight,
+            residual_on,
+            residual_scale,
+            random,
             out,
             json,
         } => {
@@ -517,6 +570,9 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                     "--init-from starts PPO or SAC from a policy; BC learns from the expert"
                 );
             }
+            if residual_on.is_some() && !matches!(algo, Algorithm::Ppo) {
+                anyhow::bail!("--residual-on trains a residual with PPO (--algo ppo)");
+            }
             let (std_start, std_end) = match (&std, &init_from) {
                 (Some(v), _) => (v[0], v[1]),
                 (None, Some(_)) => (0.05, 0.02),
@@ -525,7 +581,7 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                     (d.std_start, d.std_end)
                 }
             };
-            let cfg = EnvConfig::new(kind);
+            let cfg = random.config(kind);
             mkdir(&out)?;
             let t0 = std::time::Instant::now();
             let (policy, name) = match algo {
@@ -564,6 +620,8 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                         init_from: init_from.clone(),
                         critic_warmup,
                         bc_weight,
+                        residual_on: residual_on.clone(),
+                        residual_scale,
                         eval_episodes: select_episodes,
                         learning_rate: learning_rate.unwrap_or(PpoConfig::default().learning_rate),
                         ..PpoConfig::default()
@@ -572,6 +630,11 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                         ProgressBar::hidden()
                     } else {
                         bar(iterations, "PPO")
+                    };
+                    let name = if residual_on.is_some() {
+                        "ppo-residual"
+                    } else {
+                        "ppo"
                     };
                     let (policy, curve) = ppo::train(&robot, &cfg, &p_cfg, |r| {
                         b.inc(1);
@@ -584,8 +647,8 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                     })?;
                     b.finish_and_clear();
                     ppo::write_curve_csv(&out.join("curve.csv"), &curve)?;
-                    curve_chart(&out, kind, "PPO", &curve)?;
-                    (policy, "ppo")
+                    curve_chart(&out, kind, name, &curve)?;
+                    (policy, name)
                 }
                 Algorithm::Sac => {
                     let s_cfg = SacConfig {
@@ -626,16 +689,28 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                 algorithm: name.into(),
                 seed,
                 score: report.episode_return.mean,
+                residual: None,
             };
             policy.save(&out.join("policy.ckpt"), &meta)?;
             plot_episode(&out, kind, name, "surrogate", &report)?;
+            // A residual is judged against its base on the same held-out episodes.
+            let base_report = match policy.residual() {
+                Some(r) => Some(evaluate(&mut env, eval_episodes, 2_000_000, |_, o| {
+                    r.base.act(o)
+                })?),
+                None => None,
+            };
             let v = serde_json::json!({
                 "task": kind.name(),
                 "algorithm": name,
                 "seed": seed,
                 "train_seconds": train_s,
                 "init_from": init_from,
+                "residual_on": residual_on,
+                "residual_scale": residual_on.as_ref().map(|_| residual_scale),
+                "randomisation": random.json(),
                 "eval": summary(&report),
+                "base_eval": base_report.as_ref().map(summary),
                 "policy": out.join("policy.ckpt"),
             });
             write_json(&out.join("eval.json"), &v)?;
@@ -643,6 +718,9 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                 println!("{}", serde_json::to_string_pretty(&v)?);
             } else {
                 print_eval(kind, name, &report);
+                if let Some(b) = &base_report {
+                    print_eval(kind, "its base, same episodes", b);
+                }
                 println!("trained in {train_s:.0} s; wrote {}", out.display());
             }
         }
@@ -655,6 +733,7 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
             out,
             json,
             deploy,
+            random,
         } => {
             let robot = robot(&model)?;
             let loaded = match &policy {
@@ -672,7 +751,10 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
             let who = loaded
                 .as_ref()
                 .map_or("expert".to_string(), |(_, m)| m.algorithm.clone());
-            let cfg = EnvConfig::new(kind);
+            let cfg = random.config(kind);
+            if !cfg.randomisation.is_none() && deploy.plant != PlantArg::Surrogate {
+                anyhow::bail!("plant perturbations apply to the surrogate environment only");
+            }
             let episode = |s: u64| match deploy.path {
                 PathArg::Task => Episode::new(kind, &robot.rest_tcp(), &cfg.contact, s),
                 PathArg::FigureEight => Episode::figure_eight(&robot.rest_tcp(), &cfg.contact, s),
@@ -740,6 +822,7 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
             };
             let mut v = summary(&report);
             v["deployment"] = extra.clone();
+            v["randomisation"] = random.json();
             if let Some(out) = &out {
                 mkdir(out)?;
                 let plant = extra["plant"].as_str().unwrap_or("surrogate");

@@ -156,7 +156,8 @@ pub enum TactileCommand {
     },
     /// Builds the NPE dataset: per set-up and depth the top-face nodal displacement and contact
     /// force (FEM, cached per set-up and reused), pose, depth, total force and the contact
-    /// points in the sensor frame, as NPY with manifest.json naming shapes and units.
+    /// points in the sensor frame, as NPY with manifest.json naming shapes and units, and the
+    /// contact mask of every sample as PNG (mask_SSS.png) with its area, centroid and angle.
     Dataset {
         /// Data directory (default: OCM_DATA_DIR, else ../shared/data).
         #[arg(long)]

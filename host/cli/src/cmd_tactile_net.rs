@@ -67,6 +67,19 @@ pub struct TrainNetArgs {
     /// Output folder (checkpoint, loss curve, summary.json, example PNGs).
     #[arg(long, default_value = "out/tactile/nets")]
     pub out: PathBuf,
+    /// Start from this checkpoint's weights (same network and size) instead of random ones:
+    /// a second stage at a lower `--lr` (there is no learning-rate schedule).
+    #[arg(long)]
+    pub init_from: Option<PathBuf>,
+    /// Render the pairs with the optics `compare-real` fitted to the real sensor (its
+    /// map.json: colour transform, depth shading, smoothing) instead of the calibration as
+    /// measured; the image layout stays the networks' landscape frame.
+    #[arg(long)]
+    pub optics: Option<PathBuf>,
+    /// Score this checkpoint (written by an earlier run with the same data set, scale and
+    /// seed) on the same split instead of training; writes `<net>_scores.json` in `--out`.
+    #[arg(long)]
+    pub score_only: Option<PathBuf>,
     /// Print the JSON summary.
     #[arg(long)]
     pub json: bool,
@@ -79,8 +92,22 @@ pub struct PerceiveArgs {
     pub checkpoint: PathBuf,
     /// RGB frames (320 x 240 or 640 x 480) in the orientation of the training images (gel y
     /// along the columns, x along the rows).
-    #[arg(required = true)]
+    #[arg(required_unless_present = "real")]
     pub images: Vec<PathBuf>,
+    /// Instead of IMAGES: the 100 real edge6 frames, warped into the network's frame through
+    /// the camera map of this `compare-real` map.json, scored against the masks measured on
+    /// them (IoU, centroid, rotation); writes real_scores.json and example PNGs.
+    #[arg(long)]
+    pub real: Option<PathBuf>,
+    /// With --real: map the real colour change back into the calibrated sensor's colours
+    /// (inverse of the fitted colour transform) before the network; for a network trained on
+    /// the calibration as measured (not with `train --optics`).
+    #[arg(long)]
+    pub uncolour: bool,
+    /// With --real: keep the real frames' brightness drift (by default each channel's median
+    /// change over the camera's view is subtracted).
+    #[arg(long)]
+    pub keep_drift: bool,
     /// No-contact background of the same sensor. Default: frame 00 of the real edge6 sequence.
     #[arg(long)]
     pub background: Option<PathBuf>,
@@ -108,7 +135,10 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
     let ds = Dataset::read(&a.dataset)
         .with_context(|| format!("reading the data set {}", a.dataset.display()))?;
     let (digit, gel) = digit_gel(a.data.as_deref(), &ds.manifest.mesh)?;
-    let renderer = real::default_renderer(&digit)?;
+    let mut renderer = real::default_renderer(&digit)?;
+    if let Some(p) = &a.optics {
+        real::OpticsFile::read(p)?.apply(&mut renderer);
+    }
     let pairs = build_pairs_mirrored(&ds, &gel, &renderer, a.scale, a.mirror)?;
     let t_pairs = t0.elapsed().as_secs_f64();
     let kind = match a.net {
@@ -135,7 +165,27 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
         NetKind::Perception => NetConfig::perception(pairs.rows, pairs.cols),
         NetKind::Rendering => NetConfig::rendering(pairs.rows, pairs.cols),
     };
-    let net = cfg.init(&cpu_autodiff(), a.seed)?;
+    if let Some(ck) = &a.score_only {
+        return score_only(&a, ck, kind, &data, &pairs, &held, &split.val);
+    }
+    let net = match &a.init_from {
+        Some(p) => {
+            let (net, c) = nets::load(p, &cpu_autodiff())?;
+            anyhow::ensure!(
+                c == cfg,
+                "{} holds {:?} at {} x {}, not the {:?} network at {} x {} asked for",
+                p.display(),
+                c.kind,
+                c.cols,
+                c.rows,
+                cfg.kind,
+                cfg.cols,
+                cfg.rows
+            );
+            net
+        }
+        None => cfg.init(&cpu_autodiff(), a.seed)?,
+    };
     let tc = TrainConfig {
         epochs: a.epochs,
         batch_size: a.batch,
@@ -159,6 +209,9 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
         "seed": a.seed,
         "mask_loss": a.mask_loss,
         "mirror": a.mirror,
+        "init_from": a.init_from.as_ref().map(|p| p.display().to_string()),
+        "optics": a.optics.as_ref().map(|p| p.display().to_string()),
+        "learning_rate": a.lr,
         "dataset": a.dataset.display().to_string(),
         "scale": a.scale,
         "train_samples": split.train.len(),
@@ -228,6 +281,9 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
         "scale": a.scale,
         "mask_loss": a.mask_loss,
         "mirror": a.mirror,
+        "init_from": a.init_from.as_ref().map(|p| p.display().to_string()),
+        "optics": a.optics.as_ref().map(|p| p.display().to_string()),
+        "learning_rate": a.lr,
         "samples": pairs.len(),
         "train_samples": split.train.len(),
         "val_samples": split.val.len(),
@@ -270,6 +326,169 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `--score-only`: the held-out and validation scores of a trained checkpoint.
+fn score_only(
+    a: &TrainNetArgs,
+    ck: &std::path::Path,
+    kind: NetKind,
+    data: &NetData,
+    pairs: &pairs::Pairs,
+    held: &[usize],
+    val: &[usize],
+) -> anyhow::Result<()> {
+    let dev = cpu();
+    let (net, cfg) = nets::load(ck, &dev)?;
+    anyhow::ensure!(
+        cfg.kind == kind && (cfg.rows, cfg.cols) == (pairs.rows, pairs.cols),
+        "{} holds a {:?} network at {} x {}, asked to score {kind:?} at {} x {}",
+        ck.display(),
+        cfg.kind,
+        cfg.cols,
+        cfg.rows,
+        pairs.cols,
+        pairs.rows
+    );
+    let (h, v) = match kind {
+        NetKind::Perception => (
+            serde_json::to_value(nets::score_perception(&net, data, pairs, held, &dev)?.0)?,
+            serde_json::to_value(nets::score_perception(&net, data, pairs, val, &dev)?.0)?,
+        ),
+        NetKind::Rendering => (
+            serde_json::to_value(nets::score_rendering(&net, data, pairs, held, &dev)?.0)?,
+            serde_json::to_value(nets::score_rendering(&net, data, pairs, val, &dev)?.0)?,
+        ),
+    };
+    let name = match kind {
+        NetKind::Perception => "perception",
+        NetKind::Rendering => "rendering",
+    };
+    let v = serde_json::json!({
+        "network": name,
+        "checkpoint": ck.display().to_string(),
+        "image": [pairs.rows, pairs.cols],
+        "held_out": h,
+        "validation": v,
+    });
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    std::fs::write(
+        a.out.join(format!("{name}_scores.json")),
+        serde_json::to_string_pretty(&v)?,
+    )?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        println!("{name} {}: held out {}", ck.display(), v["held_out"]);
+    }
+    Ok(())
+}
+
+/// `ocm tactile perceive --real MAP`: the network on the real edge6 frames.
+fn perceive_real(
+    a: &PerceiveArgs,
+    net: &ocm_learn::UNet,
+    cfg: &NetConfig,
+    digit: &std::path::Path,
+    gel: &Gel,
+    map_json: &std::path::Path,
+) -> anyhow::Result<()> {
+    use ocm_tactile::nets::real_frames::{self, RealOptions};
+    let fitted = real::OpticsFile::read(map_json)?;
+    let frames = real::load_frames(&digit.join("real-frames-edge6"), "edge6")?;
+    let (land, _, _) = pairs::image_map(gel, 1);
+    let opts = RealOptions {
+        uncolour: a.uncolour,
+        remove_drift: !a.keep_drift,
+        ..RealOptions::default()
+    };
+    let t = std::time::Instant::now();
+    let (scores, pred) = real_frames::perceive_real(
+        net,
+        (cfg.rows, cfg.cols),
+        &land,
+        &frames,
+        &fitted,
+        &opts,
+        &cpu(),
+    )?;
+    let seconds = t.elapsed().as_secs_f64();
+    let med = |f: &dyn Fn(&real_frames::RealFrameScore) -> f64, odd: bool| {
+        let v: Vec<f64> = scores
+            .iter()
+            .filter(|s| !odd || s.frame % 2 == 1)
+            .map(f)
+            .filter(|x| !x.is_nan())
+            .collect();
+        median(v)
+    };
+    let summary = |odd: bool| {
+        serde_json::json!({
+            "frames": scores.iter().filter(|s| !odd || s.frame % 2 == 1).count(),
+            "iou_median": med(&|s| s.iou, odd),
+            "centroid_mm_median": med(&|s| s.centroid_mm, odd),
+            "rotation_rad_median": med(&|s| s.rotation_rad, odd),
+            "rotation_rad_median_elongated": med(&|s| if s.real_elongation >= nets::ROTATION_MIN_ELONGATION { s.rotation_rad } else { f64::NAN }, odd),
+        })
+    };
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let n = cfg.rows * cfg.cols;
+    let mut images = Vec::new();
+    for k in [41usize, 61, 81, 99] {
+        if k >= frames.len() {
+            continue;
+        }
+        let img = side_by_side(&[
+            &downscale(
+                &real_frames::warp_image(&frames[k], &fitted.map, &land, ROWS, COLS),
+                ROWS / cfg.rows,
+            ),
+            &depth_image(&pred[(k - 1) * n..k * n], cfg.rows, cfg.cols),
+        ])?;
+        let p = a.out.join(format!("real_{k:02}.png"));
+        img.write_png(&p)?;
+        images.push(p.display().to_string());
+    }
+    let v = serde_json::json!({
+        "checkpoint": a.checkpoint.display().to_string(),
+        "map": map_json.display().to_string(),
+        "uncolour": a.uncolour,
+        "remove_drift": !a.keep_drift,
+        "image": [cfg.rows, cfg.cols],
+        "all_frames": summary(false),
+        "odd_frames": summary(true),
+        "seconds": seconds,
+        "images": images,
+        "per_frame": scores,
+    });
+    std::fs::write(
+        a.out.join("real_scores.json"),
+        serde_json::to_string_pretty(&v)?,
+    )?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        println!(
+            "real edge6 frames: all {}; odd {}; files in {}",
+            v["all_frames"],
+            v["odd_frames"],
+            a.out.display()
+        );
+    }
+    Ok(())
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
 fn rayon_threads() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
@@ -294,6 +513,9 @@ pub fn perceive(a: PerceiveArgs) -> anyhow::Result<()> {
     );
     let scale = ROWS / cfg.rows;
     let (digit, gel) = digit_gel(a.data.as_deref(), "DIGIT_v8.vtk")?;
+    if let Some(map_json) = &a.real {
+        return perceive_real(&a, &net, &cfg, &digit, &gel, map_json);
+    }
     let bg_path = a
         .background
         .unwrap_or_else(|| digit.join(real::DEFAULT_BACKGROUND));

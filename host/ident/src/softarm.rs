@@ -122,6 +122,62 @@ pub fn load(path: &Path) -> Result<Record, IdentError> {
     Ok(rec)
 }
 
+/// The soft arm against its linear-dynamic baseline: held-out (`val`) RMSE of the static map,
+/// of the linear state-space model, and of that model with the `nonlinearity` extension
+/// (stiffening inside the dynamics, refined in the loop), all free-run.
+#[derive(Debug, Clone, Copy)]
+pub struct DynamicComparison {
+    /// Order of the state-space model chosen by its criterion.
+    pub order: usize,
+    /// Static affine map `y = A u + b`.
+    pub static_rmse: f64,
+    /// Linear state-space model.
+    pub linear_rmse: f64,
+    /// Linear state-space model with the `nonlinearity` extension.
+    pub extended_rmse: f64,
+    /// `100 (1 - extended / linear)`.
+    pub gain_pct: f64,
+}
+
+/// Fits the static map, the linear state-space model and its nonlinear extension on the
+/// training trials of `rec` and scores them on its held-out trials.
+pub fn dynamic_comparison(rec: &Record) -> Result<DynamicComparison, IdentError> {
+    use crate::baseline::{Baseline, SeriesModel};
+    use crate::cause::Cause;
+    use crate::extension::Prepared;
+    let test = crate::split::held_out(rec);
+    let train: Vec<bool> = test.iter().map(|t| !t).collect();
+    let preset = ocm_shared::params::ParamPreset::Table31;
+    let fixed = Prepared::new(
+        rec,
+        Baseline::for_record(rec, &train, SeriesModel::Static, preset)?,
+        test.clone(),
+    );
+    let static_rmse = crate::select::heldout_rmse(&fixed, &fixed.fit_set(&[]).pred);
+    let baseline = Baseline::for_record(rec, &train, SeriesModel::StateSpace, preset)?;
+    let order = match &baseline {
+        Baseline::StateSpace(ss) => ss.order(),
+        _ => 0,
+    };
+    let prep = Prepared::new(rec, baseline, test);
+    let linear_rmse = crate::select::heldout_rmse(&prep, &prep.fit_set(&[]).pred);
+    let ext = prep.fit_set(&[Cause::Nonlinearity]);
+    if !ext.ill_conditioned.is_empty() {
+        return Err(IdentError::Invalid(format!(
+            "{}: the nonlinear extension is ill-conditioned on {:?}",
+            rec.source, ext.ill_conditioned
+        )));
+    }
+    let extended_rmse = crate::select::heldout_rmse(&prep, &ext.pred);
+    Ok(DynamicComparison {
+        order,
+        static_rmse,
+        linear_rmse,
+        extended_rmse,
+        gain_pct: 100.0 * (1.0 - extended_rmse / linear_rmse),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

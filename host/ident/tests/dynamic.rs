@@ -185,29 +185,3 @@ const PAIRS: [[Cause; 2]; 3] = [
 /// 5000) and 6 of 12 with two (`OCM_DYN_PAIR_SEEDS=2`: one mass 5 of 6, two masses 1 of 6);
 /// the 80 % is not reached, see the README.
 const PAIR_FLOOR_PCT: usize = 33;
-
-/// The speed figure of a 100k-row dynamic record (no assertion on time: run it with
-/// `--ignored --nocapture` and read the figure; the identification itself must still work).
-#[test]
-#[ignore]
-fn dynamic_100k_record_figure() {
-    let g = generate(&DynSpec {
-        system: System::Oscillator1,
-        effects: vec![Cause::Friction],
-        seed: 7,
-        rows: 100_000,
-    });
-    let cfg = Config {
-        series_model: SeriesModel::StateSpace,
-        ..Config::default()
-    };
-    let t0 = std::time::Instant::now();
-    let id = identify(&g.record, &cfg).unwrap();
-    eprintln!(
-        "100k-row dynamic record: {:.1} s, named {:?}, gain {:.1} %",
-        t0.elapsed().as_secs_f64(),
-        id.report.causes,
-        id.report.gain_pct
-    );
-    assert!(id.report.causes.contains(&Cause::Friction));
-}

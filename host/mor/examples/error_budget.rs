@@ -10,10 +10,14 @@
 //! and the rest, and the Galerkin statics with the plate's constraint forces removed), MOR_ENERGY
 //! (strain energy of projected held-out states), MOR_WEIGHT=k (stiffness-weighted POD of every
 //! k-th training snapshot instead of the Euclidean one), MOR_SERIES=PREFIX (per-step TCP error,
-//! TCP speed and inputs to PREFIX-rank-model-tol.csv), MOR_BETA=b (Rayleigh stiffness damping b
+//! TCP speed and inputs to PREFIX-rank-model-tol.csv, then after ';' the TCP error vector in mm and
+//! the full and reduced TCP velocities in mm/s), MOR_BETA=b (Rayleigh stiffness damping b
 //! for the held-out runs of both models; the full held-out runs are re-simulated), MOR_SUBSTEPS
 //! (lists the held-out full steps the solver cut). Every run also prints the held-out TCP RMSE
-//! in three bands of the full model's TCP speed.
+//! in three bands of the full model's TCP speed. MOR_MODES=m appends the full model's m lowest
+//! rest modes to each POD basis (`ocm_mor::modes`); the printed rank is then POD rank + m.
+//! MOR_HELD=k keeps the first k held-out sequences only; MOR_PLATE=f adds the rigid top frame's
+//! elements at f times their stiffness (`ReducedModel::galerkin_with_body_penalty`).
 use nalgebra::{DMatrix, DVector};
 use ocm_fem::bellows::{Bellows, BellowsConfig};
 use ocm_mor::curve::projected_tcp_rmse_mm;
@@ -52,21 +56,36 @@ fn main() -> ocm_mor::Result<()> {
     // MOR_BETA: another Rayleigh stiffness damping for the held-out runs of both models (the
     // basis stays the one of the snapshots): is the transient error the damping's?
     let beta: Option<f64> = std::env::var("MOR_BETA").ok().and_then(|v| v.parse().ok());
-    let b = match beta {
-        Some(beta) => Bellows::load(
+    // MOR_PENALTY_FRAME: both models with the scene's penalty top frame and base (stiff elements,
+    // nodal dynamics) instead of rigid bodies; the basis stays the one of the snapshots.
+    let penalty = std::env::var("MOR_PENALTY_FRAME").is_ok();
+    let b = if beta.is_some() || penalty {
+        let d = BellowsConfig::default();
+        Bellows::load(
             &path,
             BellowsConfig {
-                rayleigh_beta: beta,
-                ..BellowsConfig::default()
+                rayleigh_beta: beta.unwrap_or(d.rayleigh_beta),
+                rigid: if penalty {
+                    ocm_fem::bellows::RigidMode::Penalty
+                } else {
+                    d.rigid
+                },
+                ..d
             },
-        )?,
-        None => b,
+        )?
+    } else {
+        b
     };
+    let resimulate = beta.is_some() || penalty;
     let drive = DriveConfig {
         dt_s: s.rec.dt_s,
         ..DriveConfig::default()
     };
     let mut held = s.held_out(&drive);
+    // MOR_HELD=k: only the first k held-out sequences (long runs at high rank).
+    if let Some(k) = std::env::var("MOR_HELD").ok().and_then(|v| v.parse().ok()) {
+        held.truncate(k);
+    }
     if std::env::var("MOR_SUBSTEPS").is_ok() {
         for (k, inputs, _) in &held {
             let tr = ocm_mor::full::simulate(&b, inputs, drive.dt_s, false, |_| {})?;
@@ -80,9 +99,25 @@ fn main() -> ocm_mor::Result<()> {
             eprintln!("held-out sequence {k}: full steps cut (step, sub-steps): {cut:?}");
         }
     }
-    if beta.is_some() {
+    // MOR_SUBSTEP=k: both models take k steps of dt/k per input step (X_S kept every k-th):
+    // a mismatch that is a difference of time discretisations shrinks with k, one of the models
+    // does not.
+    let sub: usize = std::env::var("MOR_SUBSTEP")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1)
+        .max(1);
+    let expand = |inputs: &[ocm_mor::drive::Input]| -> Vec<ocm_mor::drive::Input> {
+        inputs
+            .iter()
+            .flat_map(|i| std::iter::repeat_n(*i, sub))
+            .collect()
+    };
+    let h = drive.dt_s / sub as f64;
+    if resimulate || sub > 1 {
         for (_, inputs, xs) in &mut held {
-            *xs = ocm_mor::full::simulate(&b, inputs, drive.dt_s, false, |_| {})?.xs;
+            let tr = ocm_mor::full::simulate(&b, &expand(inputs), h, false, |_| {})?;
+            *xs = tr.xs.into_iter().skip(sub - 1).step_by(sub).collect();
         }
     }
     let n = s.disp.cols;
@@ -113,7 +148,85 @@ fn main() -> ocm_mor::Result<()> {
         }
         None => None,
     };
+    let shapes = if std::env::var("MOR_STATIC_SHAPES").is_ok() {
+        Some(ocm_mor::modes::static_shapes(&b.model, &b.top_face)?)
+    } else {
+        None
+    };
+    let vel = match std::env::var("MOR_VEL")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+    {
+        Some(m) if m > 0 => {
+            let steps = s.rec.steps;
+            let d = faer::Mat::<f64>::from_fn(n, s.train_rows(), |i, j| {
+                let prev = if j.is_multiple_of(steps) {
+                    0.0
+                } else {
+                    train[(i, j - 1)]
+                };
+                train[(i, j)] - prev
+            });
+            let pv = pod(
+                d.as_ref(),
+                &PodOptions {
+                    truncation: Truncation::Rank(m),
+                    ..PodOptions::default()
+                },
+            )?;
+            Some(DMatrix::from_fn(n, m, |i, j| pv.modes[(i, j)]))
+        }
+        _ => None,
+    };
+    // MOR_KVEL=m: also the first m modes of the stiffness-weighted POD of the step increments
+    // u_j - u_(j-1) (every 4th step and every step that follows an input jump).
+    let kvel = match std::env::var("MOR_KVEL")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+    {
+        Some(m) if m > 0 => {
+            let steps = s.rec.steps;
+            let inc = |i: usize, j: usize| {
+                let prev = if j.is_multiple_of(steps) {
+                    0.0
+                } else {
+                    train[(i, j - 1)]
+                };
+                train[(i, j)] - prev
+            };
+            let norms: Vec<f64> = (0..s.train_rows())
+                .map(|j| (0..n).map(|i| inc(i, j).powi(2)).sum::<f64>())
+                .collect();
+            let mut sorted = norms.clone();
+            sorted.sort_by(f64::total_cmp);
+            let big = sorted[sorted.len() * 95 / 100];
+            let cols: Vec<usize> = (0..s.train_rows())
+                .filter(|&j| j.is_multiple_of(4) || norms[j] >= big)
+                .collect();
+            let xs = faer::Mat::<f64>::from_fn(n, cols.len(), |i, j| inc(i, cols[j]));
+            let t0 = std::time::Instant::now();
+            let w = ocm_mor::weighted::stiffness_pod(&b.model, xs.as_ref(), m)?;
+            eprintln!(
+                "stiffness POD of {} increments: {:.1} s",
+                cols.len(),
+                t0.elapsed().as_secs_f64()
+            );
+            Some(w.basis)
+        }
+        _ => None,
+    };
     drop(train);
+    let rest = match std::env::var("MOR_MODES")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+    {
+        Some(m) if m > 0 => {
+            let modes = ocm_mor::modes::rest_modes(&b.model, m)?;
+            eprintln!("rest modes (Hz): {:.3?}", modes.frequencies_hz);
+            Some(modes)
+        }
+        _ => None,
+    };
     let probe = XsProbe::of_bellows(&b);
     println!(
         "rank,model,ecsw_tolerance,elements,tcp_rmse_mm,reduced_ms_median,iterations_per_step"
@@ -123,7 +236,32 @@ fn main() -> ocm_mor::Result<()> {
             Some(w) => w.columns(0, r).into_owned(),
             None => DMatrix::from_fn(n, r, |i, j| p.modes[(i, j)]),
         };
-        let gal = ReducedModel::galerkin(&b.model, v.clone(), &b.top_face)?;
+        // MOR_MODES=m: the POD basis enriched with the full model's m lowest rest modes.
+        let v = match &rest {
+            Some(m) => ocm_mor::modes::enrich(&v, &m.shapes, 1e-8)?,
+            None => v,
+        };
+        // MOR_STATIC_SHAPES: also the static responses at rest to each chamber and tip force.
+        let v = match &shapes {
+            Some(sh) => ocm_mor::modes::enrich(&v, sh, 1e-8)?,
+            None => v,
+        };
+        // MOR_VEL=m: also the first m POD modes of the step increments u_j - u_(j-1).
+        let v = match &vel {
+            Some(w) => ocm_mor::modes::enrich(&v, w, 1e-8)?,
+            None => v,
+        };
+        let v = match &kvel {
+            Some(w) => ocm_mor::modes::enrich(&v, w, 1e-8)?,
+            None => v,
+        };
+        let r = v.ncols();
+        eprintln!("basis rank {r}");
+        // MOR_PLATE=f: the rigid top frame's own elements resist non-rigid motion at f times
+        // their stiffness.
+        let plate: Option<f64> = std::env::var("MOR_PLATE").ok().and_then(|v| v.parse().ok());
+        let gal =
+            ReducedModel::galerkin_with_body_penalty(&b.model, v.clone(), &b.top_face, plate)?;
         let rp = ReducedProbe::new(probe.clone(), &gal);
         let tcp0 = rp.compact_state(&DVector::zeros(r), &DVector::zeros(r));
         let floor = projected_tcp_rmse_mm(&s, &v, &rp, &held)?;
@@ -328,7 +466,10 @@ fn main() -> ocm_mor::Result<()> {
             const BANDS_MM_S: [f64; 3] = [30.0, 300.0, f64::INFINITY];
             let mut bands = [(0.0, 0usize); 3];
             for (k, inputs, xs_full) in &held {
-                let run = simulate_reduced(rom, &rp, inputs, drive.dt_s)?;
+                let mut run = simulate_reduced(rom, &rp, &expand(inputs), h)?;
+                if sub > 1 {
+                    run.xs = run.xs.into_iter().skip(sub - 1).step_by(sub).collect();
+                }
                 for (j, (x, y)) in run.xs.iter().zip(xs_full).enumerate() {
                     let e = (0..3).map(|d| (x[d] - y[d]).powi(2)).sum::<f64>().sqrt();
                     let speed = (8..11).map(|d| y[d].powi(2)).sum::<f64>().sqrt();
@@ -340,11 +481,14 @@ fn main() -> ocm_mor::Result<()> {
                     bands[band].1 += 1;
                     if std::env::var("MOR_SERIES").is_ok() {
                         series.push_str(&format!(
-                            "{k},{j},{:.4},{:.4},{:?},{:?}\n",
+                            "{k},{j},{:.4},{:.4},{:?},{:?};{:.4?};{:.2?};{:.2?}\n",
                             e * 1e3,
                             speed * 1e3,
                             inputs[j].pressure_kpa,
-                            inputs[j].tip_force_n
+                            inputs[j].tip_force_n,
+                            [0, 1, 2].map(|d| (x[d] - y[d]) * 1e3),
+                            [8, 9, 10].map(|d| y[d] * 1e3),
+                            [8, 9, 10].map(|d| x[d] * 1e3),
                         ));
                     }
                 }

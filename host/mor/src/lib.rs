@@ -5,8 +5,9 @@
 //! -> [`pod`] (randomized SVD basis) -> [`rom`] (Galerkin projection, ECSW hyper-reduction via
 //! [`nnls`], reduced statics and implicit dynamics) -> [`xs`] (X_S of a full or reduced state) ->
 //! [`dataset`] (NPY + JSON manifest, shards). [`store`] keeps bases and reduced models on disk with
-//! their hashes. [`weighted`] is the stiffness-weighted POD (measured, not better for the bellows:
-//! see the README's error budget).
+//! their hashes. [`weighted`] is the stiffness-weighted POD and [`modes`] the full model's rest
+//! modes and static load shapes for basis enrichment (both measured, neither better for the
+//! bellows: see the README's error budget).
 
 #![allow(clippy::needless_range_loop)]
 
@@ -15,6 +16,7 @@ pub mod dataset;
 pub mod drive;
 pub mod error;
 pub mod full;
+pub mod modes;
 pub mod nnls;
 pub mod pod;
 pub mod rom;

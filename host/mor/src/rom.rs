@@ -150,6 +150,29 @@ pub fn straining_elements(model: &Model) -> Vec<usize> {
         .collect()
 }
 
+/// Elements whose four nodes lie on one rigid body that is not clamped (no fixed DOF).
+pub fn body_elements(model: &Model) -> Vec<usize> {
+    let mut body = vec![usize::MAX; model.num_nodes()];
+    for (b, rb) in model.rigid_bodies.iter().enumerate() {
+        if rb
+            .nodes
+            .iter()
+            .any(|&i| (0..3).any(|d| model.fixed[3 * i + d]))
+        {
+            continue;
+        }
+        for &i in &rb.nodes {
+            body[i] = b;
+        }
+    }
+    (0..model.elements.len())
+        .filter(|&e| {
+            let n = model.elements[e].nodes;
+            body[n[0]] != usize::MAX && n.iter().all(|&i| body[i] == body[n[0]])
+        })
+        .collect()
+}
+
 /// Dot product with eight independent partial sums: a single running sum is a chain of dependent
 /// additions that the compiler may not reorder, bound by the add latency instead of throughput.
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -178,7 +201,28 @@ impl ReducedModel {
     /// Plain Galerkin projection of `model` on `basis` (3N x r); the tip force acts on `tip_nodes`
     /// in equal parts.
     pub fn galerkin(model: &Model, basis: DMatrix<f64>, tip_nodes: &[usize]) -> Result<Self> {
+        Self::galerkin_with_body_penalty(model, basis, tip_nodes, None)
+    }
+
+    /// [`Self::galerkin`], with the elements inside the unclamped rigid bodies added to the force
+    /// sum at `penalty` times their stiffness when `penalty` is given. The full model moves a
+    /// rigid body by six DOFs; the reduced model moves its nodes by linear combinations of
+    /// snapshot displacements, whose non-rigid part then costs no strain energy unless the
+    /// body's own elements resist it (as the penalty mode of the bellows scene does).
+    pub fn galerkin_with_body_penalty(
+        model: &Model,
+        basis: DMatrix<f64>,
+        tip_nodes: &[usize],
+        penalty: Option<f64>,
+    ) -> Result<Self> {
         let n3 = 3 * model.num_nodes();
+        if let Some(p) = penalty
+            && !(p.is_finite() && p > 0.0)
+        {
+            return Err(MorError::Invalid(format!(
+                "rigid-body penalty must be positive and finite, got {p}"
+            )));
+        }
         if basis.nrows() != n3 || basis.ncols() == 0 {
             return Err(MorError::Invalid(format!(
                 "basis is {} x {}, the model has {n3} DOFs",
@@ -204,9 +248,17 @@ impl ReducedModel {
                 }
             }
         }
-        let elements = straining_elements(model)
+        let mut chosen: Vec<(usize, f64)> = straining_elements(model)
             .into_iter()
-            .map(|e| {
+            .map(|e| (e, 1.0))
+            .collect();
+        if let Some(p) = penalty {
+            chosen.extend(body_elements(model).into_iter().map(|e| (e, p)));
+            chosen.sort_by_key(|c| c.0);
+        }
+        let elements = chosen
+            .into_iter()
+            .map(|(e, factor)| {
                 let g = &model.elements[e];
                 let mut geom = g.clone();
                 geom.nodes = [0, 1, 2, 3];
@@ -223,7 +275,7 @@ impl ReducedModel {
                     weight: 1.0,
                     geom,
                     k0: model.element_k0(e).cloned(),
-                    scale: model.element_scale[e],
+                    scale: factor * model.element_scale[e],
                     rest: g.nodes.map(|i| model.rest[i]),
                     v,
                 }
@@ -1116,5 +1168,48 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// With the penalty, the elements inside the rigid end resist a non-rigid motion of its
+    /// nodes in proportion to the penalty (without it, a stretch of the body alone costs no strain
+    /// energy at all); a rigid translation still costs nothing there.
+    #[test]
+    fn body_penalty_stiffens_only_non_rigid_body_motion() {
+        let mesh = generate::box_mesh([4, 2, 2], [0.08, 0.02, 0.02]);
+        let mut model = Model::new(&mesh, Material::neo_hookean_bulk(2e5, 0.4), 1040.0).unwrap();
+        model.fix_plane([0.0; 3], [1.0, 0.0, 0.0], 1e-9);
+        model.add_rigid_body("end", |p| p.x >= 0.06 - 1e-9).unwrap();
+        let inside = body_elements(&model);
+        assert!(!inside.is_empty());
+        let n3 = 3 * model.num_nodes();
+        let on_body = |i: usize| model.rest[i / 3].x >= 0.06 - 1e-9;
+        // Column 0: stretch the body along x (non-rigid); column 1: translate it along y.
+        let basis = DMatrix::from_fn(n3, 2, |i, k| match (k, i % 3) {
+            (0, 0) if on_body(i) => model.rest[i / 3].x - 0.06,
+            (1, 1) if on_body(i) => 1.0,
+            _ => 0.0,
+        });
+        let energy = |penalty: Option<f64>, q: [f64; 2]| {
+            let rom =
+                ReducedModel::galerkin_with_body_penalty(&model, basis.clone(), &[0], penalty)
+                    .unwrap();
+            rom.internal(&DVector::from_row_slice(&q), false)
+                .unwrap()
+                .energy
+        };
+        let stretch = [1e-3, 0.0];
+        let (e0, e50, e100) = (
+            energy(None, stretch),
+            energy(Some(50.0), stretch),
+            energy(Some(100.0), stretch),
+        );
+        // The stretch starts at the body's first layer: only the body's own elements strain.
+        assert!(e50 > 0.0 && e0.abs() <= 1e-9 * e50, "{e0} {e50}");
+        assert!(((e100 - e0) / (e50 - e0) - 2.0).abs() < 1e-9);
+        let shift = [0.0, 1e-4];
+        let (t0, t50) = (energy(None, shift), energy(Some(50.0), shift));
+        assert!(t0 > 0.0 && (t50 - t0).abs() <= 1e-9 * t0, "{t0} {t50}");
+        let bad = ReducedModel::galerkin_with_body_penalty(&model, basis.clone(), &[0], Some(0.0));
+        assert!(bad.is_err());
     }
 }

@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::Result;
 use crate::data::Prepared;
 use crate::engine::{Fields, Npe};
+use crate::stiffness::ForceFromDisplacement;
 
 /// Major over minor second moment of a contact patch above which its orientation counts: a
 /// rounder patch has no axis to recover.
@@ -37,6 +38,42 @@ pub struct SampleScore {
     /// Part of `force_pred_n` from the nodes the FEM puts no contact force on, N: a small
     /// per-node offset that the nodal-force error hardly sees adds up here over the whole face.
     pub force_off_contact_n: f64,
+    /// Contact-node breakdown of this sample (which nodes are wrong and why).
+    #[serde(default)]
+    pub contact: ContactBreakdown,
+    /// Root mean square over the top nodes of the nodal force error (3-D), N.
+    #[serde(default)]
+    pub nodal_force_rmse_n: f64,
+    /// Total force read from the predicted displacement through the fitted stiffness
+    /// functional, N (when one is given).
+    #[serde(default)]
+    pub force_from_u_n: Option<f64>,
+    /// The same functional on the FEM's own displacement, N: the functional's floor.
+    #[serde(default)]
+    pub force_from_fem_u_n: Option<f64>,
+    /// Contact-node accuracy when the engine's contact state is `-u_z > t` for each
+    /// candidate threshold `t` of [`evaluate_with`] (the FEM's stays at 30 um).
+    #[serde(default)]
+    pub contact_accuracy_at: Vec<f64>,
+}
+
+/// Where the contact-node errors of a sample sit.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct ContactBreakdown {
+    /// Top nodes in contact in the FEM (-u_z > 30 um).
+    pub fem_contact: usize,
+    /// Nodes the engine puts in contact and the FEM does not.
+    pub false_pos: usize,
+    /// Nodes in contact in the FEM that the engine misses.
+    pub false_neg: usize,
+    /// Wrong nodes whose FEM -u_z lies within 10 um of the threshold (20-40 um).
+    pub wrong_near_threshold: usize,
+    /// Wrong nodes that a contact point penetrates (the contact prior knows them).
+    pub wrong_penetrated: usize,
+    /// Wrong nodes that have a penetrated neighbour but are not penetrated (the patch's rim).
+    pub wrong_rim: usize,
+    /// Share of top nodes the geometric rule alone (penetration > 30 um) gets right.
+    pub penetration_rule_accuracy: f64,
 }
 
 /// Summary over a set of samples.
@@ -59,6 +96,36 @@ pub struct Scores {
     /// Root mean square of the force from nodes without FEM contact force, N.
     #[serde(default)]
     pub force_off_contact_rms_n: f64,
+    /// Pooled root mean square of the per-node nodal force error over all top nodes of all
+    /// samples (3-D), N: the per-node figure, independent of how many nodes add up.
+    #[serde(default)]
+    pub nodal_force_rmse_n: f64,
+    /// The same over the nodes that carry FEM contact force only, N.
+    #[serde(default)]
+    pub nodal_force_rmse_contact_n: f64,
+    /// Force RMSE over the root mean square of the FEM force, %.
+    #[serde(default)]
+    pub force_rmse_relative_pct: f64,
+    /// Median of |F_pred - F_fem| / F_fem over samples, %.
+    #[serde(default)]
+    pub force_median_relative_pct: f64,
+    /// Mean of the FEM force over the samples, N (the scale of the force figures).
+    #[serde(default)]
+    pub force_fem_mean_n: f64,
+    /// Mean over samples of the share of top nodes the geometric rule alone (penetration
+    /// > 30 um) classifies right, %.
+    #[serde(default)]
+    pub penetration_rule_accuracy_pct: f64,
+    /// Contact-node errors summed over the samples.
+    #[serde(default)]
+    pub contact: ContactBreakdown,
+    /// RMSE of the total force read from the predicted displacement through the stiffness
+    /// functional, N.
+    #[serde(default)]
+    pub force_from_u_rmse_n: Option<f64>,
+    /// RMSE of the same functional on the FEM displacement (its floor), N.
+    #[serde(default)]
+    pub force_from_fem_u_rmse_n: Option<f64>,
 }
 
 fn mean_std(v: &[f64]) -> [f64; 2] {
@@ -96,6 +163,71 @@ pub fn elongation(mask: &Mask) -> f64 {
     if l2 <= 0.0 { f64::INFINITY } else { l1 / l2 }
 }
 
+/// Fits the stiffness functional on the FEM fields of the samples `idx` (the training
+/// set-ups).
+pub fn fit_stiffness(
+    p: &Prepared,
+    idx: &[usize],
+    degree: usize,
+    displacement_unit_m: f64,
+) -> Result<ForceFromDisplacement> {
+    let fields: Vec<(Vec<[f64; 3]>, f64)> = idx
+        .iter()
+        .map(|&i| {
+            let s = &p.samples[i];
+            let u = s
+                .target
+                .chunks(6)
+                .map(|r| [0, 1, 2].map(|k| f64::from(r[k]) * displacement_unit_m))
+                .collect();
+            (u, s.force_n[2])
+        })
+        .collect();
+    ForceFromDisplacement::fit(
+        degree,
+        &p.rest_m,
+        fields.iter().map(|(u, f)| (u.as_slice(), *f)),
+    )
+}
+
+/// Classifies the contact state of every top node of a prediction against the FEM and
+/// sorts the wrong ones: `pen_m` is each node's penetration by the contact points, `edges` the
+/// top-face graph.
+pub fn breakdown(
+    pred_m: &[[f64; 3]],
+    fem_m: &[[f64; 3]],
+    pen_m: &[f64],
+    edges: &[[usize; 2]],
+) -> ContactBreakdown {
+    let mut rim = vec![false; pen_m.len()];
+    for &[a, b] in edges {
+        rim[a] |= pen_m[b] > 0.0;
+        rim[b] |= pen_m[a] > 0.0;
+    }
+    let mut c = ContactBreakdown::default();
+    let mut rule_right = 0;
+    for (v, (a, b)) in pred_m.iter().zip(fem_m).enumerate() {
+        let (p, t) = (-a[2] > CONTACT_THRESHOLD_M, -b[2] > CONTACT_THRESHOLD_M);
+        c.fem_contact += usize::from(t);
+        if (pen_m[v] > CONTACT_THRESHOLD_M) == t {
+            rule_right += 1;
+        }
+        if p == t {
+            continue;
+        }
+        c.false_pos += usize::from(p);
+        c.false_neg += usize::from(t);
+        c.wrong_near_threshold += usize::from((-b[2] - CONTACT_THRESHOLD_M).abs() <= 10e-6);
+        if pen_m[v] > 0.0 {
+            c.wrong_penetrated += 1;
+        } else if rim[v] {
+            c.wrong_rim += 1;
+        }
+    }
+    c.penetration_rule_accuracy = rule_right as f64 / pred_m.len().max(1) as f64;
+    c
+}
+
 /// Scores the engine on the samples `idx` of `p` against the FEM fields, in batches of
 /// `batch`. `gel` and `top` are the mesh the dataset was made on (for the contact masks).
 pub fn evaluate(
@@ -106,11 +238,38 @@ pub fn evaluate(
     top: &TopSurface,
     batch: usize,
 ) -> Result<(Scores, Vec<SampleScore>)> {
+    evaluate_with(npe, p, idx, gel, top, batch, &Extra::default())
+}
+
+/// What [`evaluate_with`] scores beyond [`evaluate`].
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Extra<'a> {
+    /// The force-from-displacement functional: scores the total force read from the
+    /// predicted displacement.
+    pub stiffness: Option<&'a ForceFromDisplacement>,
+    /// Thresholds on the predicted -u_z for [`SampleScore::contact_accuracy_at`], m.
+    pub thresholds_m: &'a [f64],
+}
+
+/// [`evaluate`], and what `extra` asks for: the total force read from the predicted
+/// displacement (Table 6.1's force estimate), the accuracy at other contact thresholds.
+pub fn evaluate_with(
+    npe: &Npe,
+    p: &Prepared,
+    idx: &[usize],
+    gel: &Gel,
+    top: &TopSurface,
+    batch: usize,
+    extra: &Extra,
+) -> Result<(Scores, Vec<SampleScore>)> {
+    let (stiffness, thresholds_m) = (extra.stiffness, extra.thresholds_m);
     let grid = Grid::for_gel(gel);
     let n = p.rest_m.len();
     let (pos, graph, device) = npe.parts();
     let mut per = Vec::new();
     let mut pooled = 0.0;
+    let mut nodal_sq = [0.0; 2];
+    let mut nodal_count = [0usize; 2];
     for chunk in idx.chunks(batch.max(1)) {
         let x = p.inputs(&npe.config, chunk);
         let (out, _) = npe.net().forward(&npe.config, &x, pos, graph, device);
@@ -141,6 +300,28 @@ pub fn evaluate(
                 .zip(&truth)
                 .filter(|(a, b)| (-a[2] > CONTACT_THRESHOLD_M) == (-b[2] > CONTACT_THRESHOLD_M))
                 .count();
+            let pen: Vec<f64> = x.node_depth[j * n..(j + 1) * n]
+                .iter()
+                .map(|&d| f64::from(d) * npe.config.scales.z_m)
+                .collect();
+            let contact = breakdown(&pred.displacement_m, &truth, &pen, &p.edges);
+            let fs = npe.config.scales.nodal_force_n;
+            let mut nf = [0.0; 2];
+            let mut nc = 0usize;
+            for (f, t) in pred.nodal_force_n.iter().zip(s.target.chunks(6)) {
+                let e2: f64 = (0..3)
+                    .map(|k| (f[k] - f64::from(t[3 + k]) * fs).powi(2))
+                    .sum();
+                nf[0] += e2;
+                if t[3..6].iter().any(|&v| v != 0.0) {
+                    nf[1] += e2;
+                    nc += 1;
+                }
+            }
+            nodal_sq[0] += nf[0];
+            nodal_sq[1] += nf[1];
+            nodal_count[0] += n;
+            nodal_count[1] += nc;
             let rmse = nodal_rmse(&pred.displacement_m, &truth)?;
             pooled += rmse * rmse * n as f64;
             let mp = Mask::from_displacement(
@@ -160,6 +341,21 @@ pub fn evaluate(
                 force_pred_n: pred.total_force_n()[2],
                 force_fem_n: s.force_n[2],
                 force_off_contact_n: off,
+                contact,
+                nodal_force_rmse_n: (nf[0] / n as f64).sqrt(),
+                force_from_u_n: stiffness.map(|k| k.force_n(&p.rest_m, &pred.displacement_m)),
+                force_from_fem_u_n: stiffness.map(|k| k.force_n(&p.rest_m, &truth)),
+                contact_accuracy_at: thresholds_m
+                    .iter()
+                    .map(|&t| {
+                        pred.displacement_m
+                            .iter()
+                            .zip(&truth)
+                            .filter(|(a, b)| (-a[2] > t) == (-b[2] > CONTACT_THRESHOLD_M))
+                            .count() as f64
+                            / n as f64
+                    })
+                    .collect(),
             });
         }
     }
@@ -171,6 +367,40 @@ pub fn evaluate(
         .map(|s| (s.force_pred_n - s.force_fem_n).powi(2))
         .sum::<f64>()
         / per.len().max(1) as f64;
+    let fem_rms =
+        (per.iter().map(|s| s.force_fem_n.powi(2)).sum::<f64>() / per.len().max(1) as f64).sqrt();
+    let mut rel: Vec<f64> = per
+        .iter()
+        .filter(|s| s.force_fem_n > 0.0)
+        .map(|s| (s.force_pred_n - s.force_fem_n).abs() / s.force_fem_n)
+        .collect();
+    rel.sort_by(f64::total_cmp);
+    let rms_of = |get: &dyn Fn(&SampleScore) -> Option<f64>| {
+        stiffness.map(|_| {
+            (per.iter()
+                .map(|s| (get(s).unwrap_or(0.0) - s.force_fem_n).powi(2))
+                .sum::<f64>()
+                / per.len().max(1) as f64)
+                .sqrt()
+        })
+    };
+    let force_from_u_rmse_n = rms_of(&|s| s.force_from_u_n);
+    let force_from_fem_u_rmse_n = rms_of(&|s| s.force_from_fem_u_n);
+    let mut sum = ContactBreakdown::default();
+    for s in &per {
+        let c = &s.contact;
+        sum.fem_contact += c.fem_contact;
+        sum.false_pos += c.false_pos;
+        sum.false_neg += c.false_neg;
+        sum.wrong_near_threshold += c.wrong_near_threshold;
+        sum.wrong_penetrated += c.wrong_penetrated;
+        sum.wrong_rim += c.wrong_rim;
+    }
+    let rule: Vec<f64> = per
+        .iter()
+        .map(|s| s.contact.penetration_rule_accuracy)
+        .collect();
+    sum.penetration_rule_accuracy = mean_std(&rule)[0];
     Ok((
         Scores {
             samples: per.len(),
@@ -186,7 +416,42 @@ pub fn evaluate(
                 .sum::<f64>()
                 / per.len().max(1) as f64)
                 .sqrt(),
+            nodal_force_rmse_n: (nodal_sq[0] / nodal_count[0].max(1) as f64).sqrt(),
+            nodal_force_rmse_contact_n: (nodal_sq[1] / nodal_count[1].max(1) as f64).sqrt(),
+            force_rmse_relative_pct: 100.0 * fr.sqrt() / fem_rms,
+            force_median_relative_pct: 100.0 * rel.get(rel.len() / 2).copied().unwrap_or(f64::NAN),
+            force_fem_mean_n: per.iter().map(|s| s.force_fem_n).sum::<f64>()
+                / per.len().max(1) as f64,
+            penetration_rule_accuracy_pct: 100.0 * sum.penetration_rule_accuracy,
+            contact: sum,
+            force_from_u_rmse_n,
+            force_from_fem_u_rmse_n,
         },
         per,
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Four nodes on a chain 0-1-2-3, node 1 penetrated: each kind of error is counted where
+    /// it is.
+    #[test]
+    fn breakdown_sorts_the_wrong_nodes() {
+        let z = |v: f64| [0.0, 0.0, -v * 1e-6];
+        let fem = [z(50.0), z(80.0), z(35.0), z(0.0)];
+        // Node 0 missed (rim, 50 um: not near the threshold), node 1 right, node 2 missed
+        // (rim, 35 um: near the threshold), node 3 a false positive (no penetrated neighbour).
+        let pred = [z(10.0), z(80.0), z(25.0), z(31.0)];
+        let pen = [0.0, 80e-6, 0.0, 0.0];
+        let c = breakdown(&pred, &fem, &pen, &[[0, 1], [1, 2], [2, 3]]);
+        assert_eq!(c.fem_contact, 3);
+        assert_eq!((c.false_pos, c.false_neg), (1, 2));
+        assert_eq!(c.wrong_near_threshold, 1);
+        assert_eq!(c.wrong_penetrated, 0);
+        assert_eq!(c.wrong_rim, 2);
+        // The rule penetration > 30 um gets node 1 and node 3 right.
+        assert!((c.penetration_rule_accuracy - 0.5).abs() < 1e-12);
+    }
 }

@@ -10,6 +10,7 @@
 //! - [`engine`]: [`Npe`], the trained engine: `load`, `predict`, `latent`.
 //! - [`kernel`]: the engine's forward pass on plain values (one call, no tensors).
 //! - [`eval`]: Table 6.1 against the FEM. [`bench`]: latency per call.
+//! - [`stiffness`]: the total force read from a displacement field.
 
 pub mod bench;
 pub mod data;
@@ -20,6 +21,7 @@ pub mod figure;
 pub mod fit;
 pub mod kernel;
 pub mod model;
+pub mod stiffness;
 
 pub use engine::{Fields, Npe, Surface};
 pub use error::{NpeError, Result};

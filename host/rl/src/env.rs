@@ -13,7 +13,7 @@ use crate::tasks::{ContactConfig, Episode, POINTS, TaskKind};
 use nalgebra::Vector3;
 use ocm_surrogate::batch::EnvState;
 use ocm_surrogate::chain::{JointKind, KINDS, N_JOINTS};
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
@@ -58,6 +58,108 @@ pub struct EnvConfig {
     pub lost_distance_m: f64,
     /// Contact of the plate tasks.
     pub contact: ContactConfig,
+    /// Per-episode perturbations of the plant that neither the expert nor the observation's
+    /// targets know (none by default).
+    #[serde(default)]
+    pub randomisation: Randomisation,
+}
+
+/// Per-episode perturbations of the plant, each uniform in [-half-width, half-width] and drawn
+/// from the episode's seed on a stream of its own (the episode's path, load and start do not
+/// change). The expert and BC plan with the nominal plant; the perturbations make the model gap
+/// that a policy has to correct from what it observes.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Randomisation {
+    /// Half-width of the bias added to each of the two grouped bending commands, rad (an
+    /// actuation-map calibration error).
+    pub bend_bias_rad: f64,
+    /// Half-width of the bias added to the grouped extension command, m.
+    pub extension_bias_m: f64,
+    /// Half-width of the shift of the contact surface (plate or ball) along its normal, m;
+    /// positive towards the robot. The targets stay on the nominal surface.
+    pub surface_offset_m: f64,
+}
+
+impl Randomisation {
+    /// Whether any perturbation is drawn.
+    pub fn is_none(&self) -> bool {
+        *self == Randomisation::default()
+    }
+
+    fn validate(&self) -> Result<()> {
+        for (name, v) in [
+            ("bend bias (rad)", self.bend_bias_rad),
+            ("extension bias (m)", self.extension_bias_m),
+            ("surface offset (m)", self.surface_offset_m),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(RlError::Invalid(format!(
+                    "randomisation: {name} half-width {v} must be finite and >= 0"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The perturbation drawn for one episode.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Perturbation {
+    /// Added to the grouped command (theta_x rad, theta_y rad, d m) before the joint ranges
+    /// clamp it.
+    pub command_bias: [f64; 3],
+    /// Shift of the contact surface along its normal, m.
+    pub surface_offset_m: f64,
+}
+
+impl Perturbation {
+    /// The perturbation of episode `seed` under `r` (zero when `r` is none).
+    pub fn draw(r: &Randomisation, seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x0c0f_fee0_5eed_0002);
+        let mut u = |w: f64| w * (2.0 * rng.random::<f64>() - 1.0);
+        Perturbation {
+            command_bias: [
+                u(r.bend_bias_rad),
+                u(r.bend_bias_rad),
+                u(r.extension_bias_m),
+            ],
+            surface_offset_m: u(r.surface_offset_m),
+        }
+    }
+
+    /// `load` with its surface moved by the offset (other loads unchanged).
+    pub fn apply_to(&self, load: Load) -> Load {
+        let o = self.surface_offset_m;
+        match load {
+            Load::Plane {
+                point_m,
+                normal,
+                stiffness_n_m,
+                damping_n_s_m,
+            } => Load::Plane {
+                point_m: std::array::from_fn(|k| point_m[k] + o * normal[k]),
+                normal,
+                stiffness_n_m,
+                damping_n_s_m,
+            },
+            Load::Sphere {
+                centre_m,
+                radius_m,
+                stiffness_n_m,
+                damping_n_s_m,
+            } => Load::Sphere {
+                centre_m,
+                radius_m: radius_m + o,
+                stiffness_n_m,
+                damping_n_s_m,
+            },
+            other => other,
+        }
+    }
+
+    fn biased(&self, u: [f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|g| u[g] + self.command_bias[g])
+    }
 }
 
 /// Physics time step of the environments, s (the dissertation's surrogate ran above 1 kHz).
@@ -72,10 +174,12 @@ impl EnvConfig {
             init_noise: 0.02,
             lost_distance_m: 0.05,
             contact: ContactConfig::default(),
+            randomisation: Randomisation::default(),
         }
     }
 
     fn validate(&self) -> Result<()> {
+        self.randomisation.validate()?;
         let c = &self.contact;
         let ok = self.substeps > 0
             && self.init_noise >= 0.0
@@ -143,6 +247,7 @@ pub struct Env {
     force: Vector3<f64>,
     done: bool,
     expert_warm: [f64; 3],
+    perturbation: Perturbation,
 }
 
 fn scaled_joint(j: usize, q: f64, robot: &Robot) -> f64 {
@@ -207,6 +312,7 @@ impl Env {
             force: Vector3::zeros(),
             done: true,
             expert_warm: [0.0; 3],
+            perturbation: Perturbation::default(),
         })
     }
 
@@ -266,6 +372,11 @@ impl Env {
         self.point
     }
 
+    /// The plant perturbation of the current episode (zero without randomisation).
+    pub fn perturbation(&self) -> &Perturbation {
+        &self.perturbation
+    }
+
     /// Starts an episode drawn from `seed`: targets and load from [`Episode::new`], the robot at
     /// rest at the static equilibrium of the expert's command for the first target, perturbed by
     /// seeded noise (force task: 5 mm below the plate, out of contact).
@@ -280,8 +391,9 @@ impl Env {
     }
 
     /// Starts the given episode (an unseen path such as [`Episode::figure_eight`]); `seed`
-    /// draws the perturbation of the first command as in [`Env::reset`].
-    pub fn reset_with(&mut self, ep: Episode, seed: u64) -> Result<Vec<f64>> {
+    /// draws the perturbation of the first command and the plant's randomisation as in
+    /// [`Env::reset`].
+    pub fn reset_with(&mut self, mut ep: Episode, seed: u64) -> Result<Vec<f64>> {
         if ep.targets.len() != POINTS || ep.force_targets.len() != POINTS {
             return Err(RlError::Invalid(format!(
                 "an episode has {POINTS} targets and force targets, not {} and {}",
@@ -291,6 +403,9 @@ impl Env {
         }
         let robot = self.robot.clone();
         let gravity = robot.gravity_m_s2();
+        let pert = Perturbation::draw(&self.config.randomisation, seed);
+        ep.load = pert.apply_to(ep.load);
+        self.perturbation = pert;
         let (start_tcp, start_force) = if ep.task == TaskKind::Force {
             (
                 ep.targets[0] - Vector3::new(0.0, 0.0, 0.005),
@@ -312,7 +427,7 @@ impl Env {
             };
             (a[k] + n).clamp(-1.0, 1.0)
         });
-        let u = robot.command_of_action(&a0);
+        let u = pert.biased(robot.command_of_action(&a0));
         let q = robot.equilibrium(&u, &start_force);
         let state = robot.state_at(&q, &robot.posture_of(&u))?;
         let (p, v) = robot.tcp_and_velocity(&state);
@@ -386,7 +501,7 @@ impl Env {
         let (Some(state), Some(ep)) = (self.state.as_mut(), self.episode.as_ref()) else {
             return Err(RlError::State("step before reset".into()));
         };
-        let u = robot.command_of_action(&a);
+        let u = self.perturbation.biased(robot.command_of_action(&a));
         robot.command(state, &robot.posture_of(&u))?;
         self.force = robot.advance(state, &ep.load, self.config.substeps);
         let k = self.point;

@@ -10,7 +10,7 @@
 use crate::env::{ACT_DIM, Env, EnvConfig, OBS_DIM};
 use crate::error::{Result, RlError};
 use crate::eval::evaluate;
-use crate::policy::{Policy, policy_config};
+use crate::policy::{Policy, check_residual_scale, policy_config, zero_output_mlp};
 use crate::robot::Robot;
 use crate::vec_env::VecEnv;
 use ocm_learn::burn::module::Module;
@@ -78,6 +78,19 @@ pub struct PpoConfig {
     /// standard deviation; 0: none).
     #[serde(default)]
     pub bc_weight: f64,
+    /// Learn a residual on this policy checkpoint (a BC policy.ckpt) instead of a policy: the
+    /// environment gets the base's action plus `residual_scale` times the Gaussian sample
+    /// clamped to [-1, 1]; the residual network starts with a zero output layer, so iteration
+    /// 0 is the base exactly. With `bc_weight` the anchor is the zero correction.
+    #[serde(default)]
+    pub residual_on: Option<PathBuf>,
+    /// Largest residual correction per action value, action units.
+    #[serde(default = "default_residual_scale")]
+    pub residual_scale: f64,
+}
+
+fn default_residual_scale() -> f64 {
+    0.1
 }
 
 impl Default for PpoConfig {
@@ -102,6 +115,8 @@ impl Default for PpoConfig {
             init_from: None,
             critic_warmup: 0,
             bc_weight: 0.0,
+            residual_on: None,
+            residual_scale: default_residual_scale(),
         }
     }
 }
@@ -210,9 +225,30 @@ pub fn train(
         output: 1,
         activation: Activation::Tanh,
     };
-    let mut actor = match &cfg.init_from {
-        Some(path) => load_actor(path, &pcfg, &device, cfg.seed)?,
-        None => pcfg.init(&device, cfg.seed),
+    let base = match &cfg.residual_on {
+        Some(path) => {
+            if cfg.init_from.is_some() {
+                return Err(RlError::Invalid(
+                    "PPO takes either init_from (fine-tune a policy) or residual_on (learn a \
+                     correction to it), not both"
+                        .into(),
+                ));
+            }
+            check_residual_scale(cfg.residual_scale)?;
+            Some(Policy::load(path)?.0)
+        }
+        None => None,
+    };
+    let make_policy = |mlp: Mlp| -> Result<Policy> {
+        match &base {
+            Some(b) => Policy::residual_on(b.clone(), mlp, pcfg.clone(), cfg.residual_scale),
+            None => Ok(Policy::new(mlp, pcfg.clone())),
+        }
+    };
+    let mut actor = match (&cfg.init_from, &base) {
+        (Some(path), _) => load_actor(path, &pcfg, &device, cfg.seed)?,
+        (None, Some(_)) => zero_output_mlp(&pcfg, &device, cfg.seed),
+        (None, None) => pcfg.init(&device, cfg.seed),
     };
     let anchor = (cfg.bc_weight > 0.0).then(|| actor.valid());
     let mut critic = vcfg.init(&device, cfg.seed ^ 0x0c41_71c0);
@@ -226,8 +262,8 @@ pub fn train(
     let mut curve = vec![];
     let mut best: Option<(f64, Policy)> = None;
     let mut steps_done = 0;
-    if cfg.init_from.is_some() {
-        let p = Policy::new(actor.valid(), pcfg.clone());
+    if cfg.init_from.is_some() || base.is_some() {
+        let p = make_policy(actor.valid())?;
         let (r, pe, fe) = score(robot, env_cfg, &p, cfg.eval_episodes.max(1))?;
         let rec = RlRecord {
             iteration: 0,
@@ -271,7 +307,15 @@ pub fn train(
             b_obs.extend_from_slice(&obs);
             b_act.extend_from_slice(&acts);
             // The environment clips; the policy's log-probability is of the unclipped sample.
-            let clipped: Vec<f64> = acts.iter().map(|a| a.clamp(-1.0, 1.0)).collect();
+            let clipped: Vec<f64> = match &base {
+                Some(b) => b
+                    .act_batch(&obs)?
+                    .iter()
+                    .zip(&acts)
+                    .map(|(ab, r)| (ab + cfg.residual_scale * r.clamp(-1.0, 1.0)).clamp(-1.0, 1.0))
+                    .collect(),
+                None => acts.iter().map(|a| a.clamp(-1.0, 1.0)).collect(),
+            };
             let s = venv.step(&clipped)?;
             let final_values: Vec<Option<f64>> = s
                 .final_obs
@@ -384,7 +428,7 @@ pub fn train(
             elapsed_s: start.elapsed().as_secs_f64(),
         };
         if it % cfg.eval_every.max(1) == 0 || it == cfg.iterations {
-            let p = Policy::new(actor.valid(), pcfg.clone());
+            let p = make_policy(actor.valid())?;
             let (r, pe, fe) = score(robot, env_cfg, &p, cfg.eval_episodes.max(1))?;
             rec.eval_return = r;
             rec.eval_position_error_mm = pe;

@@ -95,6 +95,7 @@ fn ppo_is_seeded_and_its_best_policy_round_trips() {
         algorithm: "ppo".into(),
         seed: 0,
         score: c1[1].eval_return,
+        residual: None,
     };
     p1.save(&path, &meta).unwrap();
     let (p3, m3) = Policy::load(&path).unwrap();
@@ -156,6 +157,7 @@ fn ppo_and_sac_start_from_a_saved_policy() {
         algorithm: "bc".into(),
         seed: 0,
         score: 0.0,
+        residual: None,
     };
     teacher.save(&path, &meta).unwrap();
     let obs: Vec<f64> = demos.obs[..40 * 200]

@@ -12,7 +12,7 @@
 use crate::gel::Gel;
 use crate::indent::{IndentOptions, Indentation, StepOutput};
 use crate::indenter::{Indenter, Placed};
-use crate::mask::{Grid, rasterize};
+use crate::mask::{Grid, Mask, rasterize};
 use crate::output::{StepRow, write_force_depth_csv, write_step};
 use crate::setup::Setup;
 use crate::{Result, TactileError};
@@ -307,6 +307,17 @@ fn file_docs() -> std::collections::BTreeMap<String, String> {
             "<setup>/point_counts.npy",
             "(S, 1) contact points per sample",
         ),
+        (
+            "<setup>/mask_SSS.png",
+            "contact mask of sample SSS (1-based), 8-bit, 255 = contact: -u_z of the top face \
+             above 30 um on the 0.0625 mm grid, closed and hole-filled (the masks of \
+             `ocm tactile indent`)",
+        ),
+        (
+            "<setup>/mask_stats.npy",
+            "(S, 4) per sample: mask area m^2, centroid x and y m (NaN when empty), \
+             principal-axis angle rad",
+        ),
     ]
     .into_iter()
     .map(|(a, b)| (a.to_string(), b.to_string()))
@@ -530,6 +541,25 @@ pub fn write_setup(dir: &Path, s: &SetupSamples) -> Result<()> {
     write_npy(&dir.join("point_counts.npy"), &c, n, 1)
 }
 
+/// Writes the contact mask of every sample of `s` into `dir` (`mask_SSS.png`, 1-based) and
+/// their area, centroid and angle (`mask_stats.npy`), from the top-face displacement.
+pub fn write_masks(dir: &Path, gel: &Gel, top: &TopSurface, s: &SetupSamples) -> Result<()> {
+    let grid = Grid::for_gel(gel);
+    let mut stats = Vec::with_capacity(4 * s.displacement_m.len());
+    for (k, u) in s.displacement_m.iter().enumerate() {
+        let mask = Mask::from_displacement(gel, &grid, &top.extend(u, gel.num_nodes()));
+        mask.write_png(dir.join(format!("mask_{:03}.png", k + 1)))?;
+        let st = mask.stats();
+        stats.extend([st.area_m2, st.centroid_m[0], st.centroid_m[1], st.angle_rad]);
+    }
+    write_npy(
+        &dir.join("mask_stats.npy"),
+        &stats,
+        s.displacement_m.len(),
+        4,
+    )
+}
+
 /// Builds the dataset of `setups` into `out` (FEM steps cached under `cache/<setup>`),
 /// calling `progress(name, index)` before each set-up. A set-up whose FEM stops early keeps its
 /// converged depths and is listed in the manifest's `stopped` with the reason.
@@ -552,7 +582,11 @@ pub fn build(
         opts,
         out,
         progress,
-        |setup| setup_samples(gel, &top, &cgrid, setup, opts, &cache.join(&setup.name)),
+        |setup| {
+            let (s, stopped) =
+                setup_samples(gel, &top, &cgrid, setup, opts, &cache.join(&setup.name))?;
+            Ok((s, stopped, false))
+        },
     )
 }
 
@@ -619,11 +653,16 @@ pub fn build_reduced(
     let tag = format!("reduced:{}", model_dir.display());
     build_with(gel, mesh_name, &tag, setups, opts, out, progress, |setup| {
         let dir = out.join(&setup.name);
+        // `write_setup` writes point_counts.npy last and `write_masks` mask_stats.npy after
+        // it: with both there the set-up is complete; with the arrays alone only its masks
+        // are missing (an interrupted run, or a data set from before the masks).
         if dir.join("point_counts.npy").is_file() {
-            return Ok((read_setup(&dir, setup, top.nodes.len())?, None));
+            let s = read_setup(&dir, setup, top.nodes.len())?;
+            let complete = dir.join("mask_stats.npy").is_file();
+            return Ok((s, None, complete));
         }
         let s = setup_samples_reduced(gel, &top, &cgrid, setup, opts, model, options)?;
-        Ok((s, None))
+        Ok((s, None, false))
     })
 }
 
@@ -676,7 +715,8 @@ fn read_setup(dir: &Path, setup: &Setup, m: usize) -> Result<SetupSamples> {
 }
 
 /// The data-set loop shared by the FEM and the reduced model: `samples` yields one set-up's
-/// samples (and why it stopped early, if it did).
+/// samples, why it stopped early (if it did) and whether its files in `out` are already
+/// complete (then they are not written again).
 #[allow(clippy::too_many_arguments)]
 fn build_with(
     gel: &Gel,
@@ -686,7 +726,7 @@ fn build_with(
     opts: &DatasetOptions,
     out: &Path,
     mut progress: impl FnMut(&str, usize),
-    mut samples: impl FnMut(&Setup) -> Result<(SetupSamples, Option<String>)>,
+    mut samples: impl FnMut(&Setup) -> Result<(SetupSamples, Option<String>, bool)>,
 ) -> Result<Manifest> {
     std::fs::create_dir_all(out).map_err(|e| TactileError::io(out, e))?;
     let top = TopSurface::from_gel(gel);
@@ -715,14 +755,18 @@ fn build_with(
     for (k, setup) in setups.iter().enumerate() {
         progress(&setup.name, k);
         match samples(setup) {
-            Ok((s, stopped)) => {
+            Ok((s, stopped, complete)) => {
                 if let Some(why) = stopped {
                     manifest.stopped.push((setup.name.clone(), why));
                 }
                 if s.depth_m.is_empty() {
                     continue;
                 }
-                write_setup(&out.join(&setup.name), &s)?;
+                if !complete {
+                    let dir = out.join(&setup.name);
+                    write_setup(&dir, &s)?;
+                    write_masks(&dir, gel, &top, &s)?;
+                }
                 manifest.setups.push(SetupEntry {
                     name: s.name.clone(),
                     indenter: s.indenter.clone(),
@@ -949,6 +993,234 @@ mod tests {
             },
         };
         assert!(cg.contact_points(&beside).is_empty());
+    }
+
+    /// A fresh scratch folder for one test.
+    fn scratch(tag: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("ocm-dataset-{tag}-{}", std::process::id()));
+        std::fs::remove_dir_all(&d).ok();
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    /// Writes a sphere of radius `r` whose lowest point lies at `(ox, oy, 0)` as a binary STL
+    /// (metres: the part is smaller than 0.2) and returns its path.
+    fn sphere_stl(dir: &Path, name: &str, r: f64, ox: f64, oy: f64) -> PathBuf {
+        let (pts, tris) = crate::shapes::sphere_surface(r, 24);
+        let mesh = ocm_fem::mesh::Mesh {
+            points: pts.iter().map(|p| [p[0] + ox, p[1] + oy, p[2]]).collect(),
+            triangles: tris,
+            ..Default::default()
+        };
+        let path = dir.join(format!("{name}.stl"));
+        let mut f = std::fs::File::create(&path).unwrap();
+        ocm_fem::mesh::stl::write_binary(&mut f, &mesh).unwrap();
+        path
+    }
+
+    fn setup_of(name: &str, stl: PathBuf, xy: [f64; 2], euler: [f64; 3]) -> Setup {
+        Setup {
+            name: name.into(),
+            stl,
+            placement: crate::indent::Placement {
+                xy_m: xy,
+                euler_deg: euler,
+            },
+            unseen: false,
+        }
+    }
+
+    /// Random placements: the same seed gives the same set-ups, another seed others; set-up k
+    /// takes base k mod 2 and is named r<seed>-<k>-<base>; the tip's centre (the sphere's
+    /// lowest point, 1 mm off the STL origin, so the rotation moves it) lands uniformly inside
+    /// the top face less the margin; only the Euler z angle changes. Bad margins and an empty
+    /// base are errors.
+    #[test]
+    fn random_setups_are_seeded_and_stay_on_the_gel() {
+        let gel = block();
+        let dir = scratch("random");
+        let base = [
+            setup_of(
+                "ball",
+                sphere_stl(&dir, "ball", 1e-3, 1e-3, 0.0),
+                [3e-3, 2e-3],
+                [0.0, 0.0, 30.0],
+            ),
+            setup_of(
+                "pea",
+                sphere_stl(&dir, "pea", 0.5e-3, 0.0, -0.5e-3),
+                [1e-3, 1e-3],
+                [5.0, 0.0, 0.0],
+            ),
+        ];
+        let margin = 0.5e-3;
+        let a = random_setups(&gel, &base, 40, 7, margin).unwrap();
+        let b = random_setups(&gel, &base, 40, 7, margin).unwrap();
+        let c = random_setups(&gel, &base, 40, 8, margin).unwrap();
+        assert_eq!(a.len(), 40);
+        for (x, y) in a.iter().zip(&b) {
+            assert_eq!(x.name, y.name);
+            assert_eq!(x.placement, y.placement);
+        }
+        assert!(
+            a.iter()
+                .zip(&c)
+                .all(|(x, y)| x.placement.xy_m != y.placement.xy_m)
+        );
+        let (lo, hi) = gel.top_bounds();
+        let mut tips = vec![];
+        for (k, s) in a.iter().enumerate() {
+            let bs = &base[k % 2];
+            assert_eq!(s.name, format!("r7-{k:04}-{}", bs.name));
+            assert_eq!(s.stl, bs.stl);
+            let e = s.placement.euler_deg;
+            assert_eq!(e[..2], bs.placement.euler_deg[..2]);
+            assert!((0.0..360.0).contains(&e[2]));
+            // Below the placed sphere's centre lies its lowest point: the STL's centre turned.
+            let rot = crate::indenter::Pose::rotation_from_degrees(e);
+            let off = if k % 2 == 0 {
+                Vector3::new(1e-3, 0.0, 1e-3)
+            } else {
+                Vector3::new(0.0, -0.5e-3, 0.5e-3)
+            };
+            let t = rot * off;
+            let tip = [s.placement.xy_m[0] + t.x, s.placement.xy_m[1] + t.y];
+            for d in 0..2 {
+                assert!(
+                    tip[d] >= lo[d] + margin - 5e-5 && tip[d] <= hi[d] - margin + 5e-5,
+                    "{}: tip {tip:?}",
+                    s.name
+                );
+            }
+            tips.push(tip);
+        }
+        // Uniform over the face: the tips spread over most of it.
+        for d in 0..2 {
+            let (mn, mx) = tips
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), t| {
+                    (a.min(t[d]), b.max(t[d]))
+                });
+            assert!(mx - mn > 0.6 * (hi[d] - lo[d] - 2.0 * margin), "axis {d}");
+        }
+        assert!(random_setups(&gel, &base, 3, 7, 2.5e-3).is_err());
+        assert!(random_setups(&gel, &base, 3, 7, -1e-3).is_err());
+        assert!(random_setups(&gel, &[], 3, 7, margin).is_err());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// `build_reduced` resumes: a set-up whose arrays and masks are in the output folder is
+    /// read back, not recomputed (a marker put into its files survives the rerun); a set-up
+    /// whose folder is gone is recomputed to the same arrays; a set-up with arrays but no
+    /// masks gets its masks. The masks agree with their statistics and sit under the sphere.
+    #[test]
+    fn build_reduced_resumes_and_writes_masks() {
+        use crate::reduced::{ReducedModel, ReducedOptions};
+        let gel = block();
+        let dir = scratch("resume");
+        let stl = sphere_stl(&dir, "ball", 1.5e-3, 0.0, 0.0);
+        let setups = [
+            setup_of("a", stl.clone(), [3e-3, 2e-3], [0.0; 3]),
+            setup_of("b", stl.clone(), [2.5e-3, 2.2e-3], [0.0; 3]),
+        ];
+        // The basis: the FEM of the ball at both placements.
+        let ind = Indenter::from_stl(&stl).unwrap();
+        let mut o = IndentOptions::protocol(gel.material.young_pa);
+        o.steps = 4;
+        o.step_m = 50e-6;
+        let mut fields: Vec<Vec<[f64; 3]>> = vec![];
+        for s in &setups {
+            let mut run = Indentation::new("fem", &gel, &ind, s.placement, o).unwrap();
+            fields.extend(run.run(|_| {}).unwrap().into_iter().map(|s| s.displacement));
+        }
+        let pod = ocm_mor::pod::PodOptions {
+            truncation: ocm_mor::pod::Truncation::Rank(8),
+            oversampling: 4,
+            power_iterations: 2,
+            seed: 1,
+        };
+        let model = ReducedModel::build(&gel, "block", &fields, vec!["fem".into()], &pod).unwrap();
+        let opts = DatasetOptions {
+            steps: 3,
+            step_m: 50e-6,
+            grid_spacing_m: 0.25e-3,
+        };
+        let ro = ReducedOptions::for_modulus(gel.material.young_pa);
+        let out = dir.join("data");
+        let run = || {
+            build_reduced(
+                &gel,
+                "block",
+                &setups,
+                &opts,
+                &model,
+                &dir,
+                ro,
+                &out,
+                |_, _| {},
+            )
+            .unwrap()
+        };
+        let first = run();
+        assert_eq!(first.setups.len(), 2);
+        let d1 = Dataset::read(&out).unwrap();
+        // Masks: one PNG per sample, its pixel count is the stats' area, and the deepest mask
+        // is centred under the ball.
+        let grid = Grid::for_gel(&gel);
+        for (e, s) in first.setups.iter().zip(&setups) {
+            let sd = out.join(&e.name);
+            let stats = ocm_fem::npy::read_f64_2d(sd.join("mask_stats.npy")).unwrap();
+            assert_eq!((stats.rows, stats.cols), (3, 4));
+            for k in 0..3 {
+                let png =
+                    crate::image_io::read_gray(sd.join(format!("mask_{:03}.png", k + 1))).unwrap();
+                assert_eq!((png.rows, png.cols), (grid.rows, grid.cols));
+                let set = png.pixels.iter().filter(|&&v| v > 127.0).count() as f64;
+                let area = stats.data[4 * k];
+                assert!((set * grid.pixel_m * grid.pixel_m - area).abs() < 1e-15);
+            }
+            let last = &stats.data[8..12];
+            assert!(last[0] > 0.0);
+            for d in 0..2 {
+                assert!(
+                    (last[1 + d] - s.placement.xy_m[d]).abs() < 0.15e-3,
+                    "{}: centroid {last:?}",
+                    e.name
+                );
+            }
+        }
+        // Interrupted: b's folder is gone; a, complete, carries a marker in its forces.
+        let force_a = out.join("a").join("force_n.npy");
+        let marked: Vec<f64> = d1.setups[0]
+            .force_n
+            .iter()
+            .flatten()
+            .map(|f| 2.0 * f)
+            .collect();
+        write_npy(&force_a, &marked, 3, 3).unwrap();
+        std::fs::remove_dir_all(out.join("b")).unwrap();
+        let second = run();
+        let d2 = Dataset::read(&out).unwrap();
+        assert_eq!(
+            serde_json::to_string(&first.setups).unwrap(),
+            serde_json::to_string(&second.setups).unwrap()
+        );
+        let f2: Vec<f64> = d2.setups[0].force_n.iter().flatten().copied().collect();
+        assert_eq!(f2, marked, "a finished set-up is read back, not recomputed");
+        let (b1, b2) = (&d1.setups[1], &d2.setups[1]);
+        assert_eq!(b1.displacement_m, b2.displacement_m);
+        assert_eq!(b1.force_n, b2.force_n);
+        assert_eq!(b1.points_m, b2.points_m);
+        assert!(out.join("b").join("mask_003.png").is_file());
+        // Arrays without masks: the masks are written, the arrays read back.
+        std::fs::remove_file(out.join("a").join("mask_stats.npy")).unwrap();
+        std::fs::remove_file(out.join("a").join("mask_002.png")).unwrap();
+        run();
+        assert!(out.join("a").join("mask_002.png").is_file());
+        assert!(out.join("a").join("mask_stats.npy").is_file());
+        let f3 = ocm_fem::npy::read_f64_2d(&force_a).unwrap().data;
+        assert_eq!(f3, marked);
+        std::fs::remove_dir_all(&dir).ok();
     }
 
     #[test]

@@ -107,6 +107,10 @@ pub struct Indentation<'a> {
     /// Options.
     pub options: IndentOptions,
     steps_done: usize,
+    /// The last gel evaluation (with its tangent) and the positions it was taken at: a
+    /// converged Newton solve ends with the tangent at its solution, which the next solve
+    /// (the next multiplier update or depth) starts from.
+    cached: Option<(Vec<f64>, Evaluation)>,
 }
 
 const NONE: u32 = u32::MAX;
@@ -173,6 +177,7 @@ impl<'a> Indentation<'a> {
             depth_m: 0.0,
             options,
             steps_done: 0,
+            cached: None,
         })
     }
 
@@ -409,6 +414,18 @@ impl Indentation<'_> {
         unreachable!("the loop returns on its last update")
     }
 
+    /// The gel's evaluation with its tangent at the current positions, from the cache when it
+    /// was taken there.
+    fn evaluate_current(&mut self) -> ocm_fem::Result<Evaluation> {
+        if let Some((x, ev)) = self.cached.take()
+            && x == self.x
+            && ev.tangent.is_some()
+        {
+            return Ok(ev);
+        }
+        self.evaluate(&self.x, true)
+    }
+
     fn evaluate(&self, x: &[f64], tangent: bool) -> ocm_fem::Result<Evaluation> {
         self.gel
             .model
@@ -456,7 +473,7 @@ impl Indentation<'_> {
                 node,
             }
         };
-        let mut ev = self.evaluate(&self.x, true).map_err(|e| Failure {
+        let mut ev = self.evaluate_current().map_err(|e| Failure {
             why: e.to_string(),
             residual: f64::NAN,
             node: 0,
@@ -472,6 +489,9 @@ impl Indentation<'_> {
                 );
             }
             if rn <= self.options.rtol * scale || rn <= self.options.abs_tol_n {
+                if ev.tangent.is_some() {
+                    self.cached = Some((self.x.clone(), ev));
+                }
                 return Ok((forces, rn));
             }
             stats.0 += 1;

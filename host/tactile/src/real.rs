@@ -209,6 +209,55 @@ pub struct MaskFit {
     pub fit_iou: f64,
 }
 
+/// The camera map and optics `compare-real` fitted, as its `map.json` holds them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OpticsFile {
+    /// The gel-to-image map of the real camera.
+    pub map: CameraMap,
+    /// Real frame k shows FEM step k - offset.
+    pub offset_steps: usize,
+    /// Gain on the calibrated change.
+    #[serde(default = "one")]
+    pub gain: f64,
+    /// Height smoothing, pixels.
+    #[serde(default)]
+    pub smooth_px: f32,
+    /// Colour transform of the calibrated change (rows: R, G, B out).
+    pub colour: [[f64; 3]; 3],
+    /// Depth shading, grey levels per m.
+    pub depth_gain_per_m: [f64; 3],
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl OpticsFile {
+    /// Reads `map.json` as `compare-real` writes it; an error names the file and what is
+    /// missing.
+    pub fn read(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| TactileError::Input(format!("reading {}: {e}", path.display())))?;
+        serde_json::from_str(&text).map_err(|e| {
+            TactileError::Input(format!(
+                "{} is not a compare-real map.json (map, offset_steps, colour, depth_gain_per_m): {e}",
+                path.display()
+            ))
+        })
+    }
+
+    /// Sets `renderer`'s optics (gain, smoothing, colour transform, depth shading) to these.
+    pub fn apply(&self, renderer: &mut Renderer) {
+        set_optics(
+            renderer,
+            self.gain,
+            self.smooth_px,
+            &self.colour,
+            &self.depth_gain_per_m,
+        );
+    }
+}
+
 /// A mask with its pixel count and bounding box (rows, cols; inclusive), for fast IoUs.
 struct Boxed<'a> {
     mask: &'a Mask,
@@ -1095,5 +1144,42 @@ mod tests {
         assert!((b.iter().sum::<f32>() - 1.0).abs() < 1e-5);
         assert!(b[15 * 40 + 20] < 0.1 && b[15 * 40 + 21] > 0.0);
         assert_eq!(gaussian_blur(&s, 30, 40, 0.0), s);
+    }
+
+    /// A map.json as compare-real writes it reads back and sets the renderer's optics; one
+    /// without a colour transform is refused naming the file.
+    #[test]
+    fn optics_file_reads_and_applies() {
+        let dir = std::env::temp_dir().join(format!("ocm-optics-file-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let good = dir.join("map.json");
+        std::fs::write(
+            &good,
+            r#"{"colour": [[0.5, 0, 0], [0, 2, 0], [0, 0, 1]], "depth_gain_per_m": [-10, 0, 5],
+                "fit_iou": 0.5, "gain": 1.0, "offset_steps": 16, "smooth_px": 7.0,
+                "map": {"angle_rad": 1.0, "mirror": true, "offset_px": [3, 4], "px_per_m": 17000}}"#,
+        )
+        .unwrap();
+        let f = OpticsFile::read(&good).unwrap();
+        assert_eq!(f.offset_steps, 16);
+        assert!(f.map.mirror && f.map.px_per_m == 17000.0);
+        let bg = RgbImage {
+            rows: 4,
+            cols: 4,
+            data: vec![100; 48],
+        };
+        let table = vec![0.0; 3 * 3 * 6];
+        let calib =
+            crate::optics::PolyCalib::from_tables(3, [&table, &table, &table], "t").unwrap();
+        let mut r = Renderer::new(calib, &bg).unwrap();
+        f.apply(&mut r);
+        assert_eq!(r.colour[1][1], 2.0);
+        assert_eq!(r.depth_gain, [-10.0, 0.0, 5.0]);
+        assert_eq!(r.smooth_px, 7.0);
+        let bad = dir.join("bad.json");
+        std::fs::write(&bad, r#"{"map": {"angle_rad": 1.0, "mirror": true, "offset_px": [3, 4], "px_per_m": 1}, "offset_steps": 1}"#).unwrap();
+        let e = OpticsFile::read(&bad).unwrap_err().to_string();
+        assert!(e.contains("bad.json") && e.contains("colour"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
     }
 }

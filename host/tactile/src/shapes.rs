@@ -7,6 +7,13 @@ use crate::indenter::Indenter;
 /// A sphere of radius `r_m` centred at (0, 0, r_m) (lowest point at the origin), from a
 /// latitude-longitude mesh with `n` bands, refined towards the lowest pole where contact happens.
 pub fn sphere(r_m: f64, n: usize) -> Result<Indenter> {
+    let (pts, tris) = sphere_surface(r_m, n);
+    Indenter::from_triangles("sphere", pts, tris)
+}
+
+/// The closed triangle surface of [`sphere`]: points (m) and outward-wound triangles (to write
+/// an STL of it).
+pub fn sphere_surface(r_m: f64, n: usize) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
     let n = n.max(4);
     let seg = 2 * n;
     let mut pts = vec![[0.0, 0.0, 0.0]];
@@ -43,7 +50,7 @@ pub fn sphere(r_m: f64, n: usize) -> Result<Indenter> {
             tris.push([a, d, c]);
         }
     }
-    Indenter::from_triangles("sphere", pts, tris)
+    (pts, tris)
 }
 
 /// A flat-ended cylinder of radius `a_m` and height `h_m` standing on the origin (axis z), with
@@ -116,10 +123,169 @@ pub fn quarter_block(
     })
 }
 
+/// The quarter block [0, l]^3 refined around the contact corner (0, 0, l) by cube shells: a
+/// uniform core cube of side `core_m` with `m` hexes per edge, then `layers` shells, each the
+/// previous one scaled about the corner by a constant ratio (core_m to l). Every shell keeps
+/// m x m hexes per face, so the element size grows in proportion to the distance from the
+/// corner: a contact of radius a between core_m and l meets elements of about a / m whatever
+/// its size, which a tensor-product grading cannot do at the same cost. Symmetry rollers on
+/// x = 0 and y = 0 and a roller base, as [`quarter_block`].
+pub fn shell_quarter_block(
+    m: usize,
+    layers: usize,
+    core_m: f64,
+    l_m: f64,
+    young_pa: f64,
+    poisson: f64,
+) -> Result<crate::gel::Gel> {
+    if m == 0 || layers == 0 || !(core_m > 0.0 && core_m < l_m && l_m.is_finite()) {
+        return Err(crate::TactileError::Input(format!(
+            "shell block needs m >= 1, layers >= 1 and 0 < core < l (got m {m}, layers {layers}, \
+             core {core_m} m, l {l_m} m)"
+        )));
+    }
+    let ratio = (l_m / core_m).powf(1.0 / layers as f64);
+    let scale = |t: usize| {
+        if t == layers {
+            l_m / core_m
+        } else {
+            ratio.powi(t as i32)
+        }
+    };
+    let mf = m as f64;
+    let mut b = BlockMesher::new(l_m * 1e-9);
+    // Corner frame (xi, eta, zeta) = (x, y, l - z): the contact corner at its origin.
+    let place = |v: [f64; 3]| [v[0], v[1], l_m - v[2]];
+    b.add([m, m, m], |[i, j, k]| {
+        place([i as f64, j as f64, k as f64].map(|c| c / mf * core_m))
+    });
+    // The three shell stacks; their index axes run the same way on every shared face, so the
+    // six-tet split of the hexes conforms across them.
+    b.add([layers, m, m], |[t, j, k]| {
+        let s = scale(t) * core_m;
+        place([s, s * j as f64 / mf, s * k as f64 / mf])
+    });
+    b.add([m, layers, m], |[i, t, k]| {
+        let s = scale(t) * core_m;
+        place([s * i as f64 / mf, s, s * k as f64 / mf])
+    });
+    b.add([m, m, layers], |[i, j, t]| {
+        let s = scale(t) * core_m;
+        place([s * i as f64 / mf, s * j as f64 / mf, s])
+    });
+    let tol = 1e-12;
+    crate::gel::Gel::with_constraints(b.mesh, crate::gel::GelMaterial { young_pa, poisson }, |p| {
+        [p.x < tol, p.y < tol, p.z < tol]
+    })
+}
+
+/// Structured hex blocks split into six tets each, merged where their nodes coincide.
+struct BlockMesher {
+    mesh: ocm_fem::mesh::Mesh,
+    ids: std::collections::HashMap<[i64; 3], usize>,
+    quantum: f64,
+}
+
+impl BlockMesher {
+    fn new(quantum: f64) -> Self {
+        BlockMesher {
+            mesh: ocm_fem::mesh::Mesh::default(),
+            ids: std::collections::HashMap::new(),
+            quantum,
+        }
+    }
+
+    /// Adds an n[0] x n[1] x n[2] hex block whose node (i, j, k) lies at `pos([i, j, k])`.
+    fn add(&mut self, n: [usize; 3], pos: impl Fn([usize; 3]) -> [f64; 3]) {
+        let [nx, ny, nz] = n;
+        let local = |i: usize, j: usize, k: usize| (k * (ny + 1) + j) * (nx + 1) + i;
+        let mut global = vec![0; (nx + 1) * (ny + 1) * (nz + 1)];
+        for k in 0..=nz {
+            for j in 0..=ny {
+                for i in 0..=nx {
+                    let p = pos([i, j, k]);
+                    let key = p.map(|c| (c / self.quantum).round() as i64);
+                    let next = self.mesh.points.len();
+                    let id = *self.ids.entry(key).or_insert(next);
+                    if id == next {
+                        self.mesh.points.push(p);
+                    }
+                    global[local(i, j, k)] = id;
+                }
+            }
+        }
+        let perms = [
+            [0, 1, 2],
+            [0, 2, 1],
+            [1, 0, 2],
+            [1, 2, 0],
+            [2, 0, 1],
+            [2, 1, 0],
+        ];
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    for p in perms {
+                        let mut c = [i, j, k];
+                        let mut t = [global[local(i, j, k)]; 4];
+                        for (s, &ax) in p.iter().enumerate() {
+                            c[ax] += 1;
+                            t[s + 1] = global[local(c[0], c[1], c[2])];
+                        }
+                        self.mesh.tets.push(t);
+                    }
+                }
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use nalgebra::Vector3;
+
+    /// The shell-graded block fills [0, l]^3 exactly with a closed, conforming boundary (a
+    /// non-conforming split between the stacks would leave interior faces on the boundary),
+    /// and its elements grow with the distance from the contact corner.
+    #[test]
+    fn shell_block_is_conforming_and_graded() {
+        let (m, layers, core, l) = (4, 6, 0.5e-3, 8e-3);
+        let gel = shell_quarter_block(m, layers, core, l, 1e5, 0.3).unwrap();
+        let mesh = &gel.mesh;
+        let v: f64 = (0..mesh.tets.len()).map(|t| mesh.tet_volume(t)).sum();
+        assert!((v - l.powi(3)).abs() < 1e-9 * l.powi(3), "volume {v}");
+        assert!((0..mesh.tets.len()).all(|t| mesh.tet_volume(t) > 0.0));
+        let b = ocm_fem::mesh::surface::boundary_faces(&mesh.points, &mesh.tets);
+        assert_eq!(ocm_fem::mesh::surface::open_edges(&b), 0);
+        let area: f64 = b
+            .iter()
+            .map(|t| {
+                let p = t.map(|i| Vector3::from(mesh.points[i]));
+                0.5 * (p[1] - p[0]).cross(&(p[2] - p[0])).norm()
+            })
+            .sum();
+        assert!((area - 6.0 * l * l).abs() < 1e-9 * l * l, "area {area}");
+        assert_eq!(
+            mesh.points.len(),
+            (m + 1).pow(3) + 3 * layers * (m + 1) * (m + 1) - 3 * layers * (m + 1) + layers
+        );
+        // Node spacing along the top edge y = 0, z = l: core / m at the corner, then growing.
+        let mut xs: Vec<f64> = mesh
+            .points
+            .iter()
+            .filter(|p| p[1].abs() < 1e-12 && (p[2] - l).abs() < 1e-12)
+            .map(|p| p[0])
+            .collect();
+        xs.sort_by(f64::total_cmp);
+        assert_eq!(xs.len(), m + layers + 1);
+        let dx: Vec<f64> = xs.windows(2).map(|w| w[1] - w[0]).collect();
+        assert!((dx[0] - core / m as f64).abs() < 1e-15);
+        assert!(dx.windows(2).all(|w| w[1] >= w[0] - 1e-15));
+        assert!(dx[dx.len() - 1] > 10.0 * dx[0]);
+        assert!(shell_quarter_block(0, 3, core, l, 1e5, 0.3).is_err());
+        assert!(shell_quarter_block(4, 3, l, l, 1e5, 0.3).is_err());
+    }
 
     /// Enclosed volumes against the analytic ones; signed distances of the sphere against
     /// |x - c| - r (up to the faceting).

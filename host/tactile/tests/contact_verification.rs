@@ -36,19 +36,20 @@ fn check_solver_guarantees(out: &[StepOutput], o: &IndentOptions) {
     }
 }
 
-/// Relative force error allowed on the fast test blocks (16^3 graded hexes, 8 mm): linear tets
-/// on this mesh are stiffer than the continuum. The `hertz_study` example shows the mesh, not
-/// the finite block, sets the error (24^3: +8.0 % at delta/R 0.05; a block twice as large at
-/// 16^3: no better); a 5 % mesh takes minutes per run (README).
+/// Relative force error allowed on the fast tensor-product test block of the flat punch (16^3
+/// graded hexes, 8 mm): linear tets on this mesh are stiffer than the continuum.
 const FAST_TOL: f64 = 0.15;
 
-/// Hertz: a rigid sphere on an elastic half-space, F = 4/3 E* R^1/2 delta^3/2, at
-/// delta/R = 0.05 and 0.1 (a quarter model with symmetry planes); the error must also shrink
-/// relative to the depth-independent part, i.e. F grows as delta^3/2 within 3 %.
+/// Hertz: a rigid sphere R = 2 mm on an elastic half-space, F = 4/3 E* R^1/2 delta^3/2 (a quarter
+/// model with symmetry planes), on the shell-graded block of `shapes::shell_quarter_block`
+/// (6 x 6 hexes per shell face, a 0.2 mm core, 75 shells out to 32 mm, 9,868 nodes): within
+/// 5 % at delta/R = 0.01, within 9 % at 0.05 and 0.1 (measured +3.8, +6.7 and +7.6 %; the
+/// `hertz_study` example and the README show the error falling with the radial refinement
+/// and the block size), and F grows as delta^3/2 within 3 %.
 #[test]
 fn hertz_sphere() {
     let r = 2e-3;
-    let gel = quarter_block(16, 8e-3, 8e-3, 0.08);
+    let gel = shapes::shell_quarter_block(6, 75, 0.2e-3, 32e-3, E, NU).unwrap();
     let sphere = shapes::sphere(r, 48).unwrap();
     let o = options(10, 0.02e-3);
     let place = Placement {
@@ -60,7 +61,7 @@ fn hertz_sphere() {
     check_solver_guarantees(&out, &o);
     let e_star = E / (1.0 - NU * NU);
     let mut f = vec![];
-    for s in [&out[4], &out[9]] {
+    for (s, tol) in [(&out[0], 0.05), (&out[4], 0.09), (&out[9], 0.09)] {
         let d = s.depth_m;
         let hertz = 4.0 / 3.0 * e_star * r.sqrt() * d.powf(1.5);
         f.push(4.0 * s.indenter_force_n[2]);
@@ -71,14 +72,9 @@ fn hertz_sphere() {
             f[f.len() - 1],
             100.0 * rel
         );
-        assert!(
-            rel.abs() < FAST_TOL,
-            "delta/R {}: {:+.2} %",
-            d / r,
-            100.0 * rel
-        );
+        assert!(rel.abs() < tol, "delta/R {}: {:+.2} %", d / r, 100.0 * rel);
     }
-    let exponent = (f[1] / f[0]).ln() / 2f64.ln();
+    let exponent = (f[2] / f[1]).ln() / 2f64.ln();
     println!("force exponent {exponent:.3} (Hertz 1.5)");
     assert!((exponent - 1.5).abs() < 0.03 * 1.5, "{exponent}");
 }

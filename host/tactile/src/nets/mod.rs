@@ -4,6 +4,7 @@
 //! ([`pairs`]).
 
 pub mod pairs;
+pub mod real_frames;
 
 use crate::mask::{Grid, Mask, mask_from_fn};
 use crate::metrics;
@@ -367,6 +368,61 @@ pub fn train(
     })?)
 }
 
+/// Least elongation ([`elongation`]) of the true contact mask for its principal axis to count
+/// as defined: 0.2 is an axis ratio sqrt(l1 / l2) of 1.12. Below it (discs, rings, squares,
+/// dot grids) the second moments are nearly equal and the axis angle is set by a few rim
+/// pixels, so the rotation error measures pixel noise, not orientation.
+pub const ROTATION_MIN_ELONGATION: f64 = 0.2;
+
+/// Elongation of a mask, 1 - l2 / l1 with l1 >= l2 the eigenvalues of its second central
+/// moments: 0 for a disc or a square (no defined principal axis), towards 1 for a line.
+/// 0 for an empty mask.
+pub fn elongation(mask: &Mask) -> f64 {
+    let g = mask.grid;
+    let (mut n, mut sr, mut sc) = (0.0, 0.0, 0.0);
+    for (i, _) in mask.pixels.iter().enumerate().filter(|(_, p)| **p) {
+        n += 1.0;
+        sr += (i / g.cols) as f64;
+        sc += (i % g.cols) as f64;
+    }
+    if n == 0.0 {
+        return 0.0;
+    }
+    let (cr, cc) = (sr / n, sc / n);
+    let (mut mrr, mut mcc, mut mrc) = (0.0, 0.0, 0.0);
+    for (i, _) in mask.pixels.iter().enumerate().filter(|(_, p)| **p) {
+        let (dr, dc) = ((i / g.cols) as f64 - cr, (i % g.cols) as f64 - cc);
+        mrr += dr * dr;
+        mcc += dc * dc;
+        mrc += dr * dc;
+    }
+    let mean = 0.5 * (mrr + mcc);
+    let half_gap = (0.25 * (mrr - mcc).powi(2) + mrc * mrc).sqrt();
+    let (l1, l2) = (mean + half_gap, mean - half_gap);
+    if l1 <= 0.0 { 0.0 } else { 1.0 - l2 / l1 }
+}
+
+/// One scored held-out sample of the perception network.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PerceptionSample {
+    /// Sample index in the pairs.
+    pub sample: usize,
+    /// Set-up name.
+    pub setup: String,
+    /// Indentation depth, mm.
+    pub depth_mm: f64,
+    /// Contact pixels of the true mask.
+    pub true_pixels: usize,
+    /// Contact-mask IoU.
+    pub iou: f64,
+    /// Centroid error, mm (NaN when the prediction has no contact).
+    pub centroid_mm: f64,
+    /// Rotation error, rad (NaN when the prediction has no contact).
+    pub rotation_rad: f64,
+    /// Elongation of the true mask ([`elongation`]).
+    pub true_elongation: f64,
+}
+
 /// Perception scores on held-out samples.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct PerceptionScores {
@@ -378,12 +434,22 @@ pub struct PerceptionScores {
     pub iou_mean: f64,
     /// Median centroid error, mm.
     pub centroid_mm_median: f64,
-    /// Median rotation error, rad.
+    /// Median rotation error over every contact, rad (isotropic contacts included).
     pub rotation_rad_median: f64,
+    /// Median rotation error over the contacts whose true mask has a defined principal axis
+    /// (elongation at least [`ROTATION_MIN_ELONGATION`]), rad.
+    #[serde(default)]
+    pub rotation_rad_median_elongated: f64,
+    /// Samples in that median.
+    #[serde(default)]
+    pub rotation_elongated_samples: usize,
     /// RMSE of u_z over all pixels, m.
     pub dz_rmse_m: f64,
     /// Images per second of inference (batches of 8).
     pub images_per_s: f64,
+    /// Every scored sample.
+    #[serde(default)]
+    pub per_sample: Vec<PerceptionSample>,
 }
 
 /// Rendering scores on held-out samples (against the physically based renderer's frames).
@@ -437,7 +503,9 @@ pub fn score_perception(
     let ips = idx.len() as f64 / t0.elapsed().as_secs_f64();
     let n = pairs.pixels();
     let grid = pairs.grid();
-    let (mut ious, mut cens, mut rots) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut ious, mut cens, mut rots, mut rots_el) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut per_sample = Vec::new();
     let (mut se, mut count) = (0.0, 0usize);
     for (k, &i) in idx.iter().enumerate() {
         let truth = &pairs.dz_m[i * n..(i + 1) * n];
@@ -451,12 +519,34 @@ pub fn score_perception(
             continue;
         }
         let mp = contact_mask(grid, p);
-        ious.push(metrics::iou(&mt, &mp)?);
+        let iou = metrics::iou(&mt, &mp)?;
+        ious.push(iou);
+        let el = elongation(&mt);
+        let (mut cen, mut rot) = (f64::NAN, f64::NAN);
         if mp.count() > 0 {
             let (st, sp) = (mt.stats(), mp.stats());
-            cens.push(metrics::centroid_error(&st, &sp) * 1e3);
-            rots.push(metrics::rotation_error(st.angle_rad, sp.angle_rad));
+            cen = metrics::centroid_error(&st, &sp) * 1e3;
+            rot = metrics::rotation_error(st.angle_rad, sp.angle_rad);
+            cens.push(cen);
+            rots.push(rot);
+            if el >= ROTATION_MIN_ELONGATION {
+                rots_el.push(rot);
+            }
         }
+        per_sample.push(PerceptionSample {
+            sample: i,
+            setup: pairs
+                .setup_names
+                .get(pairs.setup[i])
+                .cloned()
+                .unwrap_or_default(),
+            depth_mm: pairs.depth_m[i] * 1e3,
+            true_pixels: mt.count(),
+            iou,
+            centroid_mm: cen,
+            rotation_rad: rot,
+            true_elongation: el,
+        });
     }
     let samples = ious.len();
     let mean = ious.iter().sum::<f64>() / samples.max(1) as f64;
@@ -467,8 +557,11 @@ pub fn score_perception(
             iou_mean: mean,
             centroid_mm_median: median(cens),
             rotation_rad_median: median(rots),
+            rotation_elongated_samples: rots_el.len(),
+            rotation_rad_median_elongated: median(rots_el),
             dz_rmse_m: (se / count.max(1) as f64).sqrt(),
             images_per_s: ips,
+            per_sample,
         },
         pred,
     ))
@@ -556,4 +649,45 @@ pub fn load(path: &std::path::Path, device: &Device) -> Result<(UNet, NetConfig)
     let net = cfg.init(device, 0)?;
     let net = ck.load_into(net, cfg.kind.architecture(), &cfg)?;
     Ok((net, cfg))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid() -> Grid {
+        Grid {
+            origin_m: [0.0, 0.0],
+            pixel_m: 1e-4,
+            rows: 60,
+            cols: 80,
+        }
+    }
+
+    /// A disc and a square have no principal axis (elongation near 0), a 4 : 1 bar is far
+    /// above the threshold (1 - 1/16 for its second moments), and an empty mask is 0.
+    #[test]
+    fn elongation_of_known_shapes() {
+        let disc = mask_from_fn(grid(), |r, c| {
+            (r as f64 - 30.0).powi(2) + (c as f64 - 40.0).powi(2) < 15.0f64.powi(2)
+        });
+        assert!(elongation(&disc) < 0.02, "{}", elongation(&disc));
+        let square = mask_from_fn(grid(), |r, c| {
+            (20..40).contains(&r) && (30..50).contains(&c)
+        });
+        assert!(elongation(&square) < 1e-9);
+        let bar = mask_from_fn(grid(), |r, c| {
+            (25..35).contains(&r) && (20..60).contains(&c)
+        });
+        // Moments of a 10 x 40 pixel block: (n^2 - 1) / 12 per axis.
+        let expect = 1.0 - (100.0 - 1.0) / (1600.0 - 1.0);
+        assert!((elongation(&bar) - expect).abs() < 1e-9);
+        assert!(elongation(&bar) > ROTATION_MIN_ELONGATION);
+        // Rotating the bar by 90 degrees keeps its elongation.
+        let tall = mask_from_fn(grid(), |r, c| {
+            (10..50).contains(&r) && (35..45).contains(&c)
+        });
+        assert!((elongation(&tall) - expect).abs() < 1e-9);
+        assert_eq!(elongation(&mask_from_fn(grid(), |_, _| false)), 0.0);
+    }
 }

@@ -1,0 +1,349 @@
+//! The perception network on real DIGIT frames: each camera frame is warped into the networks'
+//! landscape frame through the camera map `compare-real` fitted, its change against the warped
+//! background goes through the network, and the predicted contact is warped back into the
+//! camera image and scored against the mask measured on the real frame.
+
+use super::{NetData, NetKind, contact_mask, elongation, pairs};
+use crate::mask::{CLOSING_KERNEL_PX, Grid, Mask, mask_from_fn};
+use crate::optics::{CameraMap, RgbImage};
+use crate::real::{self, MaskOptions, OpticsFile};
+use crate::{Result, TactileError};
+use ocm_learn::UNet;
+use ocm_learn::burn::tensor::Device;
+use serde::{Deserialize, Serialize};
+
+/// `src` (seen through `src_map`) resampled bilinearly at the pixel centres of a rows x cols
+/// image seen through `dst_map`; points outside `src` take its nearest border pixel.
+pub fn warp_image(
+    src: &RgbImage,
+    src_map: &CameraMap,
+    dst_map: &CameraMap,
+    rows: usize,
+    cols: usize,
+) -> RgbImage {
+    let mut data = vec![0u8; rows * cols * 3];
+    let at = |r: usize, c: usize, ch: usize| f64::from(src.data[(r * src.cols + c) * 3 + ch]);
+    for r in 0..rows {
+        for c in 0..cols {
+            let q = src_map.to_px(dst_map.to_gel([c as f64 + 0.5, r as f64 + 0.5]));
+            let x = (q[0] - 0.5).clamp(0.0, (src.cols - 1) as f64);
+            let y = (q[1] - 0.5).clamp(0.0, (src.rows - 1) as f64);
+            let (c0, r0) = (x.floor() as usize, y.floor() as usize);
+            let (c1, r1) = ((c0 + 1).min(src.cols - 1), (r0 + 1).min(src.rows - 1));
+            let (fx, fy) = (x - c0 as f64, y - r0 as f64);
+            for ch in 0..3 {
+                let v = (1.0 - fy) * ((1.0 - fx) * at(r0, c0, ch) + fx * at(r0, c1, ch))
+                    + fy * ((1.0 - fx) * at(r1, c0, ch) + fx * at(r1, c1, ch));
+                data[(r * cols + c) * 3 + ch] = (v.clamp(0.0, 255.0) + 0.5) as u8;
+            }
+        }
+    }
+    RgbImage { rows, cols, data }
+}
+
+/// `mask` (on the image of `src_map`) seen through `dst_map` on a rows x cols image: each pixel
+/// centre takes the source pixel it falls in (outside: no contact).
+pub fn warp_mask_between(
+    mask: &Mask,
+    src_map: &CameraMap,
+    dst_map: &CameraMap,
+    rows: usize,
+    cols: usize,
+) -> Mask {
+    let g = mask.grid;
+    mask_from_fn(real::image_grid(rows, cols), |r, c| {
+        let q = src_map.to_px(dst_map.to_gel([c as f64 + 0.5, r as f64 + 0.5]));
+        let (x, y) = (q[0].floor(), q[1].floor());
+        x >= 0.0
+            && y >= 0.0
+            && (x as usize) < g.cols
+            && (y as usize) < g.rows
+            && mask.pixels[y as usize * g.cols + x as usize]
+    })
+}
+
+/// Applies the inverse of a colour transform to a channel-major `[3, n]` delta image: a change
+/// in the real sensor's colours back into the calibrating sensor's (the ones the network was
+/// trained on). An error when the transform is singular.
+pub fn uncolour(delta: &mut [f32], colour: &[[f64; 3]; 3]) -> Result<()> {
+    let m = colour;
+    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    if !(det.abs() > 1e-9) {
+        return Err(TactileError::Input(format!(
+            "colour transform {m:?} is singular (determinant {det:e})"
+        )));
+    }
+    let mut inv = [[0.0f64; 3]; 3];
+    for (i, row) in inv.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            // inv[i][j] = cofactor[j][i] / det.
+            let (a, b) = ((j + 1) % 3, (j + 2) % 3);
+            let (c, d) = ((i + 1) % 3, (i + 2) % 3);
+            *v = (m[a][c] * m[b][d] - m[a][d] * m[b][c]) / det;
+        }
+    }
+    let n = delta.len() / 3;
+    for p in 0..n {
+        let d = [delta[p], delta[n + p], delta[2 * n + p]].map(f64::from);
+        for (ch, row) in inv.iter().enumerate() {
+            delta[ch * n + p] = (row[0] * d[0] + row[1] * d[1] + row[2] * d[2]) as f32;
+        }
+    }
+    Ok(())
+}
+
+/// The perception network on one real frame, against the mask measured on it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RealFrameScore {
+    /// Real frame index.
+    pub frame: usize,
+    /// IoU of the predicted and measured masks in the camera image.
+    pub iou: f64,
+    /// Centroid distance on the gel, mm (NaN when a mask is empty).
+    pub centroid_mm: f64,
+    /// Angle between the principal axes, rad (NaN when a mask is empty).
+    pub rotation_rad: f64,
+    /// Elongation of the measured mask ([`super::elongation`]).
+    pub real_elongation: f64,
+    /// Measured contact area, mm^2 on the gel.
+    pub real_area_mm2: f64,
+    /// Predicted contact area, mm^2 on the gel.
+    pub predicted_area_mm2: f64,
+    /// Deepest predicted indentation, mm.
+    pub predicted_depth_mm: f64,
+    /// Indentation of the FEM step paired with the frame by the fitted offset, mm (10 um
+    /// steps; 0 before first touch).
+    pub paired_fem_depth_mm: f64,
+}
+
+/// Options of [`perceive_real`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RealOptions {
+    /// Map the real change back into the calibrated colours ([`uncolour`]) before the network
+    /// (for a network trained on frames rendered with the calibration as measured).
+    pub uncolour: bool,
+    /// Subtract from each channel of the real change its median over the pixels the camera
+    /// sees (the frames drift by a few grey levels in brightness between takes; the rendered
+    /// training frames never do, and the fitted depth shading reads a uniform darkening as a
+    /// uniform indentation).
+    pub remove_drift: bool,
+    /// How the real masks are measured.
+    pub mask: MaskOptions,
+    /// Indentation per real frame, m.
+    pub step_m: f64,
+}
+
+impl Default for RealOptions {
+    fn default() -> Self {
+        RealOptions {
+            uncolour: false,
+            remove_drift: true,
+            mask: MaskOptions::default(),
+            step_m: 10e-6,
+        }
+    }
+}
+
+/// Runs the perception network (`net` on `size` = (rows, cols) images of the landscape frame
+/// `land`, `land` at full 240 x 320 scale) on `frames` (camera frames, frame 0 the background)
+/// and scores every frame from 1 on where the measured or the predicted mask has contact.
+/// The predicted mask is the 30 um threshold, warped into the camera image, closed with the
+/// FEM masks' kernel and hole-filled (as the FEM masks of `compare-real`). Also returns the
+/// predicted u_z of every frame (m, `[rows, cols]` each).
+pub fn perceive_real(
+    net: &UNet,
+    size: (usize, usize),
+    land: &CameraMap,
+    frames: &[RgbImage],
+    fitted: &OpticsFile,
+    opts: &RealOptions,
+    device: &Device,
+) -> Result<(Vec<RealFrameScore>, Vec<f32>)> {
+    let (rows, cols) = size;
+    if frames.len() < 2 {
+        return Err(TactileError::Input(format!(
+            "{} real frames: need a background and at least one contact frame",
+            frames.len()
+        )));
+    }
+    let (r0, c0) = (real::ROWS, real::COLS);
+    if !(r0.is_multiple_of(rows) && c0.is_multiple_of(cols) && r0 / rows == c0 / cols) {
+        return Err(TactileError::Input(format!(
+            "network of {cols} x {rows} does not divide the {c0} x {r0} frame"
+        )));
+    }
+    let scale = r0 / rows;
+    let warp =
+        |img: &RgbImage| pairs::downscale(&warp_image(img, &fitted.map, land, r0, c0), scale);
+    let bg = warp(&frames[0]);
+    let n = rows * cols;
+    // Pixels of the network's image whose centre the real camera sees.
+    let seen: Vec<usize> = (0..n)
+        .filter(|&p| {
+            let q = [
+                ((p % cols) as f64 + 0.5) * scale as f64,
+                ((p / cols) as f64 + 0.5) * scale as f64,
+            ];
+            let t = fitted.map.to_px(land.to_gel(q));
+            t[0] >= 0.0 && t[1] >= 0.0 && t[0] < c0 as f64 && t[1] < r0 as f64
+        })
+        .collect();
+    let mut delta = Vec::with_capacity((frames.len() - 1) * 3 * n);
+    for f in &frames[1..] {
+        let mut d = pairs::delta_of(&warp(f), &bg)?;
+        if opts.remove_drift && !seen.is_empty() {
+            for ch in 0..3 {
+                let mut v: Vec<f32> = seen.iter().map(|&p| d[ch * n + p]).collect();
+                v.sort_by(f32::total_cmp);
+                let m = v[v.len() / 2];
+                for x in &mut d[ch * n..(ch + 1) * n] {
+                    *x -= m;
+                }
+            }
+        }
+        if opts.uncolour {
+            uncolour(&mut d, &fitted.colour)?;
+        }
+        delta.extend(d);
+    }
+    let k = frames.len() - 1;
+    let small_map = CameraMap {
+        px_per_m: land.px_per_m / scale as f64,
+        offset_px: land.offset_px.map(|v| v / scale as f64),
+        ..*land
+    };
+    let grid = Grid {
+        origin_m: [0.0, 0.0],
+        pixel_m: small_map.m_per_px(),
+        rows,
+        cols,
+    };
+    let batch = pairs::Pairs {
+        rows,
+        cols,
+        pixel_m: grid.pixel_m,
+        setup_names: vec!["real".into()],
+        setup_unseen: vec![true],
+        setup: vec![0; k],
+        depth_m: vec![0.0; k],
+        mirror: vec![0; k],
+        state: (0..k).collect(),
+        delta,
+        dz_m: vec![0.0; k * n],
+        splat_dz_m: Vec::new(),
+        background: bg,
+    };
+    let data = NetData::new(NetKind::Perception, &batch);
+    let idx: Vec<usize> = (0..k).collect();
+    let pred = data.predict(net, &idx, 8, device);
+    let px_per_m = fitted.map.px_per_m;
+    let area = |m: &Mask| m.count() as f64 / (px_per_m * px_per_m) * 1e6;
+    let mut out = Vec::new();
+    for (j, f) in frames[1..].iter().enumerate() {
+        let frame = j + 1;
+        let dz = &pred[j * n..(j + 1) * n];
+        let small = contact_mask(grid, dz);
+        let predicted = warp_mask_between(&small, &small_map, &fitted.map, r0, c0)
+            .closed(CLOSING_KERNEL_PX)
+            .filled();
+        let measured = real::measured_mask(f, &frames[0], &opts.mask)?;
+        if measured.count() == 0 && predicted.count() == 0 {
+            continue;
+        }
+        let (iou, cen, rot) = real::score_masks(&measured, &predicted, px_per_m)?;
+        let empty = measured.count() == 0 || predicted.count() == 0;
+        out.push(RealFrameScore {
+            frame,
+            iou,
+            centroid_mm: if empty { f64::NAN } else { cen },
+            rotation_rad: if empty { f64::NAN } else { rot },
+            real_elongation: elongation(&measured),
+            real_area_mm2: area(&measured),
+            predicted_area_mm2: area(&predicted),
+            predicted_depth_mm: -f64::from(dz.iter().copied().fold(0.0f32, f32::min)) * 1e3,
+            paired_fem_depth_mm: frame.saturating_sub(fitted.offset_steps) as f64
+                * opts.step_m
+                * 1e3,
+        });
+    }
+    Ok((out, pred))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Warping an image into another map and back reproduces it where both cover the gel, and
+    /// a mask warped through the identity is unchanged.
+    #[test]
+    fn warps_invert_and_identity_keeps_masks() {
+        let (rows, cols) = (30, 40);
+        let data: Vec<u8> = (0..rows * cols * 3)
+            .map(|i| {
+                let p = i / 3;
+                ((p / cols) * 3 + (p % cols) * 2 + (i % 3) * 20) as u8
+            })
+            .collect();
+        let img = RgbImage { rows, cols, data };
+        let a = CameraMap {
+            px_per_m: 1000.0,
+            angle_rad: 0.0,
+            mirror: false,
+            offset_px: [0.0, 0.0],
+        };
+        let b = CameraMap {
+            px_per_m: 1000.0,
+            angle_rad: std::f64::consts::PI,
+            mirror: true,
+            offset_px: [40.0, 0.0],
+        };
+        // b is a itself reflected across the image's vertical centre line: exactly a column
+        // mirror of the pixel grid, so the bilinear warp is exact.
+        let w = warp_image(&img, &a, &b, rows, cols);
+        for r in 0..rows {
+            for c in 0..cols {
+                for ch in 0..3 {
+                    assert_eq!(
+                        w.data[(r * cols + c) * 3 + ch],
+                        img.data[(r * cols + cols - 1 - c) * 3 + ch]
+                    );
+                }
+            }
+        }
+        assert_eq!(warp_image(&w, &b, &a, rows, cols), img);
+        let m = mask_from_fn(real::image_grid(rows, cols), |r, c| r > 5 && c < 12);
+        assert_eq!(warp_mask_between(&m, &a, &a, rows, cols), m);
+        let mm = warp_mask_between(&m, &a, &b, rows, cols);
+        assert_eq!(mm.count(), m.count());
+        assert!(mm.pixels[10 * cols + cols - 1] && !mm.pixels[10 * cols]);
+    }
+
+    /// The inverse colour transform undoes the transform; a singular one is refused.
+    #[test]
+    fn uncolour_inverts_the_colour_transform() {
+        let m = [
+            [0.03, -0.13, 0.33],
+            [0.21, 0.69, 0.12],
+            [-0.02, -0.74, -0.14],
+        ];
+        let calibrated = [[3.0f32, -1.0], [2.0, 5.0], [-4.0, 0.5]];
+        let mut d = vec![0.0f32; 6];
+        for p in 0..2 {
+            for ch in 0..3 {
+                d[ch * 2 + p] = (0..3)
+                    .map(|j| m[ch][j] as f32 * calibrated[j][p])
+                    .sum::<f32>();
+            }
+        }
+        uncolour(&mut d, &m).unwrap();
+        for p in 0..2 {
+            for ch in 0..3 {
+                assert!((d[ch * 2 + p] - calibrated[ch][p]).abs() < 1e-4, "{d:?}");
+            }
+        }
+        let singular = [[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 1.0]];
+        assert!(uncolour(&mut d, &singular).is_err());
+    }
+}
