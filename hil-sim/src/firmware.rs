@@ -10,7 +10,7 @@
 //! App. C), then a target and a mode. The reference is re-sent as a
 //! `SetTarget` whenever it moves.
 
-use crc::{CRC_32_ISO_HDLC, Crc};
+use crc::{CRC_32_ISO_HDLC, Crc, Table};
 use heapless::Vec as HVec;
 use ocm_firmware::app::{App, AppConfig};
 use ocm_lutgen::OcmModel;
@@ -77,6 +77,11 @@ impl Link for InProcess<'_> {
         Ok(self.app.handle(cmd, now_us))
     }
 }
+
+/// The LUT image's CRC-32, sixteen bytes a step: every boot of an
+/// in-process firmware checksums the whole image, and the table is built
+/// once, not at each boot.
+static LUT_CRC: Crc<u32, Table<16>> = Crc::<u32, Table<16>>::new(&CRC_32_ISO_HDLC);
 
 /// Safety settings the lab sends: a link timeout loose enough for a slow
 /// host (a PIL run in a debug build), the default stuck-sensor check.
@@ -209,7 +214,7 @@ impl<L: Link> FirmwareMcu<L> {
             ocm: plant.ocm,
             mount,
         }))?;
-        let crc32 = Crc::<u32>::new(&CRC_32_ISO_HDLC).checksum(image);
+        let crc32 = LUT_CRC.checksum(image);
         me.expect_ok(CommandBody::LutBegin {
             total_len: image.len() as u32,
             crc32,
@@ -287,21 +292,41 @@ impl<L: Link> FirmwareMcu<L> {
             )));
         }
         for (c, r) in cmds.iter().zip(&self.replies) {
-            if r.seq != c.seq {
-                return Err(self.error(format!(
-                    "reply to command {} answers command {}: {:?}",
-                    c.seq, r.seq, r.body
-                )));
-            }
-            if let ReplyBody::Error(e) = &r.body {
-                let what = format!("{:?}", c.body);
-                return Err(self.error(format!(
-                    "{e:?} in reply to {}",
-                    what.chars().take(60).collect::<String>()
-                )));
-            }
+            self.check_reply(c, r)?;
         }
         Ok(())
+    }
+
+    /// A reply must answer its own command and must not be an error.
+    fn check_reply(&self, c: &Command, r: &Reply) -> Result<(), SimError> {
+        if r.seq != c.seq {
+            return Err(self.error(format!(
+                "reply to command {} answers command {}: {:?}",
+                c.seq, r.seq, r.body
+            )));
+        }
+        if let ReplyBody::Error(e) = &r.body {
+            let what = format!("{:?}", c.body);
+            return Err(self.error(format!(
+                "{e:?} in reply to {}",
+                what.chars().take(60).collect::<String>()
+            )));
+        }
+        Ok(())
+    }
+
+    /// The commanded pressures of a `Telemetry` reply, pascals.
+    fn commanded(&self, body: &ReplyBody) -> Result<[f64; 3], SimError> {
+        match body {
+            ReplyBody::Telemetry(t) => {
+                let mut out = [0.0; 3];
+                for (o, p) in out.iter_mut().zip(t.commanded_pa_q8.iter()) {
+                    *o = f64::from(*p) / 256.0;
+                }
+                Ok(out)
+            }
+            other => Err(self.unexpected(other)),
+        }
     }
 
     fn expect_ok(&mut self, body: CommandBody) -> Result<ReplyBody, SimError> {
@@ -369,8 +394,19 @@ impl<L: Link> Mcu for FirmwareMcu<L> {
                 .map(|&p| round_ties_away(p).clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32)
                 .collect(),
         };
-        let _ = bodies.push(CommandBody::SensorFrame(frame));
         self.now_us = self.now_us.wrapping_add(self.period_us);
+        if bodies.is_empty() {
+            // Most ticks: the frame alone, one exchange without the batch.
+            self.seq = self.seq.wrapping_add(1);
+            let cmd = Command {
+                seq: self.seq,
+                body: CommandBody::SensorFrame(frame),
+            };
+            let reply = self.link.exchange(&cmd, self.now_us)?;
+            self.check_reply(&cmd, &reply)?;
+            return self.commanded(&reply.body);
+        }
+        let _ = bodies.push(CommandBody::SensorFrame(frame));
         self.exchange(bodies)?;
         let (last, setup) = self
             .replies
@@ -379,16 +415,7 @@ impl<L: Link> Mcu for FirmwareMcu<L> {
         if let Some(bad) = setup.iter().find(|r| r.body != ReplyBody::Ack) {
             return Err(self.unexpected(&bad.body));
         }
-        match &last.body {
-            ReplyBody::Telemetry(t) => {
-                let mut out = [0.0; 3];
-                for (o, p) in out.iter_mut().zip(t.commanded_pa_q8.iter()) {
-                    *o = f64::from(*p) / 256.0;
-                }
-                Ok(out)
-            }
-            other => Err(self.unexpected(other)),
-        }
+        self.commanded(&last.body)
     }
 }
 

@@ -37,7 +37,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::SimError;
 use crate::effects::{BoucWen, COLUMN_LOOP, Effects};
-use crate::pcc::{COS_BETA, Config, SIN_BETA, sinc_from_sin};
+use crate::pcc::{COS_BETA, Config, SIN_BETA, Turn, sinc_from_sin};
 use crate::pneumatics::{Regulator, RegulatorParams};
 use crate::potential::OcmPotential;
 
@@ -207,6 +207,9 @@ pub struct PlantState {
     pub connected: [bool; 3],
     /// Load on the plate.
     pub load: PlateLoad,
+    /// The configuration a step last left and its [`Turn`]: the tip, the
+    /// IMU and the next step's Jacobian all need that trigonometry.
+    turn: (Config, Turn),
 }
 
 fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
@@ -243,11 +246,15 @@ fn dsinc_over_x(x: f64, sin: f64, cos: f64) -> f64 {
 /// Closed-form Jacobian of [`Config::position`]: with `f = sinc^2(th/2)/2`,
 /// `p_xy = S f b` and `p_z = S sinc(th)`.
 pub fn position_jacobian(q: &Config) -> [[f64; 3]; 3] {
+    position_jacobian_with(q, &q.turn())
+}
+
+/// [`position_jacobian`] from the configuration's [`Turn`].
+pub fn position_jacobian_with(q: &Config, turn: &Turn) -> [[f64; 3]; 3] {
     let (s, b) = (q.backbone_m, [q.bend_x_rad, q.bend_y_rad]);
-    let th = q.bend_rad();
-    let half = 0.5 * th;
+    let (th, half) = (turn.theta_rad, turn.half_rad);
     // One sine and cosine of the half angle give those of the whole.
-    let (s_half, c_half) = half.sin_cos();
+    let (s_half, c_half) = (turn.sin_half, turn.cos_half);
     let (s_th, c_th) = (2.0 * s_half * c_half, 1.0 - 2.0 * s_half * s_half);
     let sh = sinc_from_sin(half, s_half);
     let f = 0.5 * sh * sh;
@@ -592,6 +599,7 @@ impl Plant {
             hysteresis: [BoucWen::default(); 3],
             connected: [true; 3],
             load,
+            turn: (q, q.turn()),
         }
     }
 
@@ -615,7 +623,7 @@ impl Plant {
         }
         let p = s.pressures_pa();
         let f = self.forces(&s.q, p);
-        let jac = self.position_jacobian(&s.q);
+        let jac = position_jacobian_with(&s.q, &s.turn());
         let fe = self.external_force_n(&s.load);
         let ext: [f64; 3] = std::array::from_fn(|k| (0..3).map(|r| jac[r][k] * fe[r]).sum());
         let d = self.d;
@@ -637,6 +645,7 @@ impl Plant {
             a[k] += dt * s.qdot[k];
         }
         s.q = Config::from_array(a);
+        s.turn = (s.q, s.q.turn());
         let after = s.q.column_lengths(d);
         if self.params.effects.hysteresis_fraction > 0.0 {
             let y = self.params.effects.hysteresis_yield_m;
@@ -652,5 +661,19 @@ impl PlantState {
     /// Chamber gauge pressures, pascals.
     pub fn pressures_pa(&self) -> [f64; 3] {
         std::array::from_fn(|i| self.regulators[i].pressure_pa())
+    }
+
+    /// The [`Turn`] of the configuration `q`: kept from the last step unless
+    /// `q` was set since.
+    pub fn turn(&self) -> Turn {
+        match self.turn {
+            (q, t) if q == self.q => t,
+            _ => self.q.turn(),
+        }
+    }
+
+    /// Plate-centre position, metres ([`Config::position`] of `q`).
+    pub fn position(&self) -> [f64; 3] {
+        self.q.position_with(&self.turn())
     }
 }

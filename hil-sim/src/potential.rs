@@ -4,9 +4,17 @@
 //! `ocm_lutgen::surface::EnergySurface`, over a fixed bend range, so that
 //! the three columns of a segment, which share one bend, contract the bend
 //! direction of the expansion once.
+//!
+//! The fit costs a few hundred evaluations of the model (about 2 % of a
+//! 13 s closed-loop run), and every run of a session builds a plant of the
+//! same design: each scenario, each controller, each of the bench's
+//! iterations. So the fits are kept per design for the life of the process
+//! ([`OcmPotential::new`]), and plants share one expansion.
 
-use ocm_lutgen::OcmModel;
+use std::sync::{Arc, Mutex};
+
 use ocm_lutgen::surface::{BendDomain, EnergySurface, elastic_and_volume};
+use ocm_lutgen::{OcmModel, OcmParams};
 
 pub use ocm_lutgen::surface::PartGrad;
 
@@ -28,8 +36,17 @@ pub struct EnergyGrad {
 /// The plant's expansion of one OCM's energy.
 #[derive(Debug, Clone)]
 pub struct OcmPotential {
-    surface: EnergySurface<NX, NY, 2>,
+    surface: Arc<EnergySurface<NX, NY, 2>>,
 }
+
+/// The expansion as fitted.
+type Surface = EnergySurface<NX, NY, 2>;
+
+/// Designs whose fits the process keeps; the oldest goes first.
+const KEPT_FITS: usize = 8;
+
+/// Fits made so far, newest last.
+static FITS: Mutex<Vec<(OcmParams, Arc<Surface>)>> = Mutex::new(Vec::new());
 
 impl OcmPotential {
     /// Strain range covered by the expansion.
@@ -37,8 +54,34 @@ impl OcmPotential {
     /// Largest per-OCM bending angle covered, radians.
     pub const MAX_BEND_RAD: f64 = 0.5;
 
-    /// Fits the expansion to `model`.
+    /// The expansion of `model`: fitted on the first call for its
+    /// parameters, shared afterwards (the fit is deterministic, so a kept
+    /// one is the one a new fit would give).
     pub fn new(model: &OcmModel) -> Result<Self, SimError> {
+        let key = *model.params();
+        // A poisoned lock only means another thread panicked mid-fit: the
+        // list itself is always whole.
+        let kept = |fits: &Vec<(OcmParams, Arc<Surface>)>| {
+            fits.iter()
+                .find(|(p, _)| *p == key)
+                .map(|(_, s)| Arc::clone(s))
+        };
+        if let Some(surface) = kept(&FITS.lock().unwrap_or_else(|e| e.into_inner())) {
+            return Ok(Self { surface });
+        }
+        let surface = Arc::new(Self::fit(model)?);
+        let mut fits = FITS.lock().unwrap_or_else(|e| e.into_inner());
+        if kept(&fits).is_none() {
+            if fits.len() >= KEPT_FITS {
+                fits.remove(0);
+            }
+            fits.push((key, Arc::clone(&surface)));
+        }
+        Ok(Self { surface })
+    }
+
+    /// Fits the expansion to `model`.
+    fn fit(model: &OcmModel) -> Result<Surface, SimError> {
         let (lo, _) = Self::STRAIN_RANGE;
         let phi_cap = model.max_bend_angle_rad(lo);
         if phi_cap <= Self::MAX_BEND_RAD {
@@ -47,7 +90,7 @@ impl OcmPotential {
                 Self::MAX_BEND_RAD
             )));
         }
-        let surface = EnergySurface::new(
+        EnergySurface::new(
             model,
             Self::STRAIN_RANGE,
             BendDomain::Absolute {
@@ -55,8 +98,7 @@ impl OcmPotential {
             },
             elastic_and_volume,
         )
-        .map_err(|e| SimError::Config(e.to_string()))?;
-        Ok(Self { surface })
+        .map_err(|e| SimError::Config(e.to_string()))
     }
 
     /// Rest length `l0` of one OCM, metres.

@@ -6,7 +6,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
-use crate::pcc::{Config, quat_from_rotvec, quat_mul};
+use crate::pcc::{Config, Turn, quat_from_rotvec, quat_mul};
 
 /// ADS1115 full-scale range at PGA gain 2/3, volts (LSB = 187.5 uV).
 pub const ADS1115_FSR_V: f64 = 6.144;
@@ -165,8 +165,13 @@ impl Sensors {
 
     /// Samples the sensors at configuration `q` and chamber pressures.
     pub fn sample(&mut self, q: &Config, pressures_pa: [f64; 3]) -> SensorSample {
+        self.sample_with(q, &q.turn(), pressures_pa)
+    }
+
+    /// [`Self::sample`] with the [`Turn`] of `q` already known.
+    pub fn sample_with(&mut self, q: &Config, turn: &Turn, pressures_pa: [f64; 3]) -> SensorSample {
         let l = q.column_lengths(self.d_m);
-        let th = q.bend_rad();
+        let th = turn.theta_rad;
         // Every column bends by the same angle: one chord factor for all.
         let chord = crate::pcc::sinc(0.5 * th / self.ocms);
         let hall_codes = std::array::from_fn(|i| {
@@ -176,7 +181,10 @@ impl Sensors {
         });
         let noise: [f64; 3] =
             std::array::from_fn(|_| self.imu.noise_rad * self.rng.sample::<f64, _>(StandardNormal));
-        let imu_quat = quat_mul(quat_mul(q.quaternion(), self.bias), quat_from_rotvec(noise));
+        let imu_quat = quat_mul(
+            quat_mul(q.quaternion_with(turn), self.bias),
+            quat_from_rotvec(noise),
+        );
         SensorSample {
             hall_codes,
             imu_quat,

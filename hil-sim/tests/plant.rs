@@ -301,3 +301,59 @@ fn gradient_only_evaluation_matches_the_full_one() {
         }
     }
 }
+
+/// The process keeps fits per design: whatever was fitted before, and
+/// after more designs than it keeps, each expansion is its own model's.
+#[test]
+fn kept_fits_belong_to_their_design() {
+    use ocm_lutgen::{OcmModel, OcmParams};
+    // Table 3.1, the calibrated set and stiffness scales in between: more
+    // designs than the process keeps, then the first ones again.
+    let designs: Vec<OcmParams> = (0..12)
+        .map(|k| OcmParams {
+            bar_stiffness_n_per_m: 1.3 * (1.0 + k as f64),
+            hinge_stiffness_n_per_m: 0.1 * (1.0 + 0.5 * k as f64),
+            ..OcmParams::TABLE_3_1
+        })
+        .chain([OcmParams::CALIBRATED, OcmParams::TABLE_3_1])
+        .collect();
+    for round in 0..2 {
+        for (k, params) in designs.iter().enumerate() {
+            let model = OcmModel::new(*params).expect("model");
+            let pot = OcmPotential::new(&model).expect("potential");
+            for (eps, phi) in [(0.3, 0.2), (-0.4, 0.1)] {
+                let e = pot.eval(eps, phi * phi).elastic.value;
+                let direct = model.energy_j(eps, phi, 0.0);
+                assert!(
+                    (e - direct).abs() < 1e-8 + 1e-6 * direct.abs(),
+                    "round {round}, design {k}: {e} J against the model's {direct} J"
+                );
+            }
+        }
+    }
+}
+
+/// A state keeps its configuration's trigonometry between steps; setting `q`
+/// by hand must not leave the old one behind.
+#[test]
+fn state_trigonometry_follows_its_configuration() {
+    let p = plant();
+    let q0 = Config::from_polar(0.15, 0.3, 0.7);
+    let mut s = p.state_at(q0, [8_000.0, 9_000.0, 10_000.0], PlateLoad::default());
+    for _ in 0..50 {
+        p.step(&mut s, [8_000.0, 9_000.0, 10_000.0]);
+        assert_eq!(s.position(), s.q.position());
+        assert_eq!(s.turn(), s.q.turn());
+    }
+    s.q = Config::from_polar(0.14, 0.6, -1.2);
+    assert_eq!(s.position(), s.q.position());
+    assert_eq!(s.turn(), s.q.turn());
+    // The cached and the fresh trigonometry give the same step.
+    let mut fresh = p.state_at(s.q, s.pressures_pa(), s.load);
+    fresh.qdot = s.qdot;
+    fresh.regulators = s.regulators.clone();
+    fresh.hysteresis = s.hysteresis;
+    p.step(&mut s, [8_000.0; 3]);
+    p.step(&mut fresh, [8_000.0; 3]);
+    assert_eq!(s.q, fresh.q);
+}

@@ -76,18 +76,35 @@ impl Config {
         }
     }
 
-    /// `(theta, sinc(theta / 2), cos(theta / 2))`: every map below is a
-    /// function of these, so each costs one square root and one `sin_cos`.
+    /// The bend angle with the sine and cosine of its half: every map below
+    /// is a function of these, so each costs one square root and one
+    /// `sin_cos`, and a caller that needs several maps of one configuration
+    /// (the lab: tip, IMU and Jacobian every tick) pays them once.
+    pub fn turn(&self) -> Turn {
+        let theta_rad = self.bend_rad();
+        let half_rad = 0.5 * theta_rad;
+        let (sin_half, cos_half) = half_rad.sin_cos();
+        Turn {
+            theta_rad,
+            half_rad,
+            sin_half,
+            cos_half,
+        }
+    }
+
+    /// `(theta, sinc(theta / 2), cos(theta / 2))`.
     fn half_turn(&self) -> (f64, f64, f64) {
-        let th = self.bend_rad();
-        let half = 0.5 * th;
-        let (s, c) = half.sin_cos();
-        (th, sinc_from_sin(half, s), c)
+        self.turn().parts()
     }
 
     /// Plate-centre position in the base frame, metres.
     pub fn position(&self) -> [f64; 3] {
-        let (_, sh, ch) = self.half_turn();
+        self.position_with(&self.turn())
+    }
+
+    /// [`Self::position`] from this configuration's [`Turn`].
+    pub fn position_with(&self, turn: &Turn) -> [f64; 3] {
+        let (_, sh, ch) = turn.parts();
         // (1 - cos th) / th^2 = sinc^2(th/2) / 2 and sin th / th =
         // sinc(th/2) cos(th/2): both smooth through the straight pose.
         let lateral = 0.5 * self.backbone_m * sh * sh;
@@ -101,7 +118,12 @@ impl Config {
     /// Plate orientation as a unit quaternion `[w, x, y, z]`: a turn by
     /// `theta` about the in-plane axis `(-sin phi, cos phi, 0)`.
     pub fn quaternion(&self) -> [f64; 4] {
-        let (_, sh, ch) = self.half_turn();
+        self.quaternion_with(&self.turn())
+    }
+
+    /// [`Self::quaternion`] from this configuration's [`Turn`].
+    pub fn quaternion_with(&self, turn: &Turn) -> [f64; 4] {
+        let (_, sh, ch) = turn.parts();
         let k = 0.5 * sh;
         [ch, -k * self.bend_y_rad, k * self.bend_x_rad, 0.0]
     }
@@ -134,6 +156,30 @@ impl Config {
         let s = chord / sinc(0.5 * th);
         let dir = if r > 0.0 { p[1].atan2(p[0]) } else { 0.0 };
         Some(Self::from_polar(s, th, dir))
+    }
+}
+
+/// The trigonometry of a configuration's bend ([`Config::turn`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Turn {
+    /// Bend angle `theta`, radians.
+    pub theta_rad: f64,
+    /// `theta / 2`, radians.
+    pub half_rad: f64,
+    /// `sin(theta / 2)`.
+    pub sin_half: f64,
+    /// `cos(theta / 2)`.
+    pub cos_half: f64,
+}
+
+impl Turn {
+    /// `sin(theta / 2) / (theta / 2)`, exact through zero.
+    pub fn sinc_half(&self) -> f64 {
+        sinc_from_sin(self.half_rad, self.sin_half)
+    }
+
+    fn parts(&self) -> (f64, f64, f64) {
+        (self.theta_rad, self.sinc_half(), self.cos_half)
     }
 }
 

@@ -75,7 +75,7 @@ pub(super) fn simulate(
         if let Some((ch, a, b)) = su.cut {
             state.connected[ch] = !(t >= a && t < b);
         }
-        let sample = sensors.sample(&state.q, state.pressures_pa());
+        let sample = sensors.sample_with(&state.q, &state.turn(), state.pressures_pa());
         // Announced loads reach the controller with the target updates.
         let announced = if cfg.ol_knows_load || su.announced {
             su.load_at(target_time(t, cfg.target_period_s), cfg)
@@ -125,7 +125,7 @@ pub(super) fn simulate(
             }
         }
         let tn = state.time_s;
-        let tip = state.q.position();
+        let tip = state.position();
         let rf = su.path.tip_at(tn);
         let err = distance(tip, rf);
         // k % log_every == 0, counted down rather than divided.
@@ -134,7 +134,10 @@ pub(super) fn simulate(
         let scored = tn >= su.score_from_s;
         // The orientation error costs a configuration solve: only where used.
         let q_err = if logged || (scored && name == "orientation") {
-            quaternion_error_rad(state.q.quaternion(), su.path.config_at(tn).quaternion())
+            quaternion_error_rad(
+                state.q.quaternion_with(&state.turn()),
+                su.path.config_at(tn).quaternion(),
+            )
         } else {
             0.0
         };

@@ -132,9 +132,11 @@ pub struct IdentArgs {
     /// Record kind (a `.mat` file is always series).
     #[arg(long, value_enum, default_value_t = KindArg::Series)]
     pub kind: KindArg,
-    /// Baseline of a `series` record without sim_ columns (a .mat soft-arm file is static).
-    #[arg(long, value_enum, default_value_t = SeriesBaseline::StateSpace)]
-    pub baseline: SeriesBaseline,
+    /// Baseline of a `series` record without sim_ columns [default: state-space; static for
+    /// the soft-arm .mat file, whose published figures are quasi-static: pass `state-space`
+    /// to judge it against the linear-dynamic baseline].
+    #[arg(long, value_enum)]
+    pub baseline: Option<SeriesBaseline>,
     /// Print the JSON report instead of the text summary.
     #[arg(long)]
     pub json: bool,
@@ -234,10 +236,12 @@ pub fn run(args: IdentArgs) -> anyhow::Result<()> {
         ocm_ident::data::read_csv(&file, kind)?
     };
     let series_model = match args.baseline {
-        // the soft arm is read as quasi-static, its published figures are on that baseline
-        _ if is_mat => SeriesModel::Static,
-        SeriesBaseline::StateSpace => SeriesModel::StateSpace,
-        SeriesBaseline::Static => SeriesModel::Static,
+        Some(SeriesBaseline::StateSpace) => SeriesModel::StateSpace,
+        Some(SeriesBaseline::Static) => SeriesModel::Static,
+        // the soft arm is read as quasi-static unless asked, its published figures are on
+        // that baseline
+        None if is_mat => SeriesModel::Static,
+        None => SeriesModel::StateSpace,
     };
     let cfg = Config {
         alpha: args.alpha,

@@ -3,7 +3,7 @@
 
 use crate::cmd_fem::{BELLOWS_MESH, data_path};
 use crate::plot::{Chart, Series};
-use crate::progress::bar;
+use crate::progress::{bar, bar_if};
 use anyhow::Context;
 use ocm_fem::bellows::{Bellows, BellowsConfig};
 use ocm_surrogate::bench::{BenchConfig, Engine};
@@ -73,8 +73,9 @@ pub enum SurrogateCommand {
         /// the same range); 0 skips the calibration.
         #[arg(long, default_value_t = 24)]
         force_samples: usize,
-        /// Held-out force-calibration pressures (seeded random, -20..35 kPa), scored only.
-        #[arg(long, default_value_t = 12)]
+        /// Held-out force-calibration pressures (seeded random, in turn inside -10..10, -20..20
+        /// and -20..35 kPa, so the fit's error is reported per range), scored only.
+        #[arg(long, default_value_t = 24)]
         force_held_out: usize,
         /// How the surrogate is held on the force jig: pinned (the TCP point) or clamped (the
         /// TCP and the plate's orientation). The FEM is always clamped by its top frame.
@@ -214,7 +215,7 @@ pub fn run(cmd: SurrogateCommand) -> anyhow::Result<()> {
                 let path = data_path(mesh, data.as_deref(), BELLOWS_MESH)?;
                 let b = Bellows::load(&path, BellowsConfig::default())?;
                 let p = SurrogateModel::calibration_pressures(force_samples, 2);
-                let held = fem_samples::random_pressures(force_held_out, 3);
+                let held = ocm_surrogate::force::nested_random_pressures(force_held_out, 3);
                 let pb = bar(p.len() + held.len(), "force jig");
                 let fs = m.calibrate_force(
                     &b,
@@ -255,15 +256,28 @@ pub fn run(cmd: SurrogateCommand) -> anyhow::Result<()> {
                 ocm_surrogate::urdf::to_urdf("ocm_bellows_surrogate", &m.geometry.chain, &m.limits),
             )?;
             plots(&m, &s, &out)?;
+            let motion = range_of_motion(&m);
             if json {
                 println!(
                     "{}",
                     serde_json::to_string_pretty(&serde_json::json!({
                         "training": m.training, "held_out": m.held_out,
+                        "range_of_motion": motion,
                         "force_calibration": m.force_calibration
                     }))?
                 );
             } else {
+                println!(
+                    "Algorithm 1 on the {} training samples: |theta| up to {:.4} rad (limit {}), d {:.4}..{:.4} m (limits {}..{}), an extension at its upper limit in {} samples",
+                    m.training_postures.len(),
+                    motion.max_abs_rotation_rad,
+                    m.limits.revolute_rad[1],
+                    motion.extension_m[0],
+                    motion.extension_m[1],
+                    m.limits.prismatic_m[0],
+                    m.limits.prismatic_m[1],
+                    motion.samples_at_extension_limit
+                );
                 let h = &m.held_out;
                 println!(
                     "held-out ({}): TCP RMSE {:.3} mm (max {:.3}), joints {:.3} deg / {:.3} mm, inverse {:.3} kPa; wrote {}",
@@ -288,6 +302,19 @@ pub fn run(cmd: SurrogateCommand) -> anyhow::Result<()> {
                             c.held_out_samples
                         );
                     }
+                    for r in &c.by_range {
+                        let f = |v: [f64; 3]| format!("{:.3} / {:.3} / {:.3}", v[0], v[1], v[2]);
+                        println!(
+                            "force, every chamber in {}..{} kPa: RMSE x/y/z {} N over {} pressures (held-out {} N over {}); FEM span {} N",
+                            r.range_kpa[0],
+                            r.range_kpa[1],
+                            f(r.rmse_n),
+                            r.samples,
+                            f(r.held_out_rmse_n),
+                            r.held_out_samples,
+                            f(r.fem_span_n)
+                        );
+                    }
                 }
             }
         }
@@ -307,35 +334,71 @@ pub fn run(cmd: SurrogateCommand) -> anyhow::Result<()> {
                 vec![Engine::parse(&engine)?]
             };
             let mut reports = vec![];
-            for engine in engines {
-                let r = ocm_surrogate::bench::run(
+            let pb = bar_if(engines.len() * repeats, "bench repeats", !json);
+            for (e, engine) in engines.iter().enumerate() {
+                let r = ocm_surrogate::bench::run_with_progress(
                     &m.geometry.chain,
                     &m.limits,
                     &BenchConfig {
-                        engine,
+                        engine: *engine,
                         envs,
                         steps,
                         threads,
                         repeats,
                         seed: 1,
                     },
+                    |k| pb.set_position((e * repeats + k) as u64),
                 )?;
                 if !json {
-                    println!(
-                        "{:>9.0} steps/s  {} (median of {repeats}; {envs} envs x {steps} steps on {threads} threads; TCP in contact {:.0} % of steps)",
-                        r.steps_per_s_median,
-                        r.engine,
-                        100.0 * r.contact_fraction
-                    );
+                    pb.suspend(|| {
+                        println!(
+                            "{:>9.0} steps/s  {} (median of {repeats}; {envs} envs x {steps} steps on {threads} threads; TCP in contact {:.0} % of steps)",
+                            r.steps_per_s_median,
+                            r.engine,
+                            100.0 * r.contact_fraction
+                        )
+                    });
                 }
                 reports.push(r);
             }
+            pb.finish_and_clear();
             if json {
                 println!("{}", serde_json::to_string_pretty(&reports)?);
             }
         }
     }
     Ok(())
+}
+
+/// How much of the joint limits Algorithm 1 uses to follow the FEM over the training samples.
+#[derive(serde::Serialize)]
+struct RangeOfMotion {
+    max_abs_rotation_rad: f64,
+    extension_m: [f64; 2],
+    samples_at_extension_limit: usize,
+}
+
+fn range_of_motion(m: &SurrogateModel) -> RangeOfMotion {
+    use ocm_surrogate::chain::{JointKind, KINDS};
+    let (mut rot, mut lo, mut hi, mut at) = (0.0f64, f64::INFINITY, f64::NEG_INFINITY, 0);
+    let top = m.limits.prismatic_m[1];
+    for q in &m.training_postures {
+        let mut hit = false;
+        for (j, &v) in q.iter().enumerate() {
+            if KINDS[j] == JointKind::Prismatic {
+                (lo, hi) = (lo.min(v), hi.max(v));
+                hit |= v >= top - 1e-9;
+            } else {
+                rot = rot.max(v.abs());
+            }
+        }
+        at += usize::from(hit);
+    }
+    RangeOfMotion {
+        max_abs_rotation_rad: rot,
+        extension_m: [lo, hi],
+        samples_at_extension_limit: at,
+    }
 }
 
 /// FEM jig force against the calibrated surrogate force, one plot per component

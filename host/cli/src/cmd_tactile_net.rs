@@ -80,6 +80,20 @@ pub struct TrainNetArgs {
     /// seed) on the same split instead of training; writes `<net>_scores.json` in `--out`.
     #[arg(long)]
     pub score_only: Option<PathBuf>,
+    /// With --score-only on a perception checkpoint: also the surface force of each held-out
+    /// sample through eq 5.8 (predicted u_z on the top nodes, the gel model solved with it)
+    /// against the contact FEM's force; writes `perception_force.json`.
+    #[arg(long, requires = "score_only")]
+    pub force: bool,
+    /// With --force: only the predicted fields (skips the two reference solves per sample
+    /// from the FEM's own u_z, on the image grid and on the nodes).
+    #[arg(long, requires = "force")]
+    pub force_fast: bool,
+    /// With --score-only on a perception checkpoint: choose the indentation threshold of the
+    /// predicted contact mask (10 to 100 um in 2.5 um steps) by the median IoU on the
+    /// validation samples, and score the held-out ones at it (the true masks stay at 30 um).
+    #[arg(long, requires = "score_only")]
+    pub fit_threshold: bool,
     /// Print the JSON summary.
     #[arg(long)]
     pub json: bool,
@@ -104,6 +118,13 @@ pub struct PerceiveArgs {
     /// the calibration as measured (not with `train --optics`).
     #[arg(long)]
     pub uncolour: bool,
+    /// With --real: bring the real change into the rendered domain by a colour transform
+    /// fitted on the even frames (their paired FEM steps from this `ocm tactile indent` cache
+    /// of edge6, e.g. out/tactile/edge6-fem, rendered with the calibration as measured, against
+    /// the real frames: `real::fit_colour` with real and rendered exchanged); the odd frames
+    /// are scored.
+    #[arg(long, conflicts_with = "uncolour")]
+    pub recolour_fem: Option<PathBuf>,
     /// With --real: keep the real frames' brightness drift (by default each channel's median
     /// change over the camera's view is subtracted).
     #[arg(long)]
@@ -166,7 +187,7 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
         NetKind::Rendering => NetConfig::rendering(pairs.rows, pairs.cols),
     };
     if let Some(ck) = &a.score_only {
-        return score_only(&a, ck, kind, &data, &pairs, &held, &split.val);
+        return score_only(&a, ck, kind, &data, &pairs, &held, &split.val, (&ds, &gel));
     }
     let net = match &a.init_from {
         Some(p) => {
@@ -326,7 +347,9 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `--score-only`: the held-out and validation scores of a trained checkpoint.
+/// `--score-only`: the held-out and validation scores of a trained checkpoint (and with
+/// `--force` the surface force of the held-out samples).
+#[allow(clippy::too_many_arguments)]
 fn score_only(
     a: &TrainNetArgs,
     ck: &std::path::Path,
@@ -335,6 +358,7 @@ fn score_only(
     pairs: &pairs::Pairs,
     held: &[usize],
     val: &[usize],
+    (ds, gel): (&Dataset, &Gel),
 ) -> anyhow::Result<()> {
     let dev = cpu();
     let (net, cfg) = nets::load(ck, &dev)?;
@@ -348,11 +372,38 @@ fn score_only(
         pairs.cols,
         pairs.rows
     );
+    let mut force = serde_json::Value::Null;
     let (h, v) = match kind {
-        NetKind::Perception => (
-            serde_json::to_value(nets::score_perception(&net, data, pairs, held, &dev)?.0)?,
-            serde_json::to_value(nets::score_perception(&net, data, pairs, val, &dev)?.0)?,
-        ),
+        NetKind::Perception => {
+            let (mut h, pred) = nets::score_perception(&net, data, pairs, held, &dev)?;
+            let (mut vs, vpred) = nets::score_perception(&net, data, pairs, val, &dev)?;
+            if a.fit_threshold {
+                let candidates: Vec<f64> = (0..=36).map(|k| 10e-6 + 2.5e-6 * k as f64).collect();
+                let (t, _) = nets::fit_threshold(&vpred, pairs, val, &candidates)?;
+                h = nets::score_predicted(&pred, pairs, held, t, h.images_per_s)?;
+                vs = nets::score_predicted(&vpred, pairs, val, t, vs.images_per_s)?;
+            }
+            if a.force {
+                use ocm_tactile::nets::force::{SurfaceForceModel, score_force};
+                let (map, _, _) = pairs::image_map(gel, a.scale);
+                let top = TopSurface::from_gel(gel);
+                let to_mesh = GridToMesh::new(&top.rest_m, pairs.rows, pairs.cols, &map)?;
+                let model = SurfaceForceModel::new(gel)?;
+                let f = score_force(&model, &to_mesh, pairs, ds, &pred, held, !a.force_fast)?;
+                std::fs::create_dir_all(&a.out)
+                    .with_context(|| format!("creating {}", a.out.display()))?;
+                std::fs::write(
+                    a.out.join("perception_force.json"),
+                    serde_json::to_string_pretty(&f)?,
+                )?;
+                let mut brief = serde_json::to_value(&f)?;
+                if let Some(o) = brief.as_object_mut() {
+                    o.remove("per_sample");
+                }
+                force = brief;
+            }
+            (serde_json::to_value(h)?, serde_json::to_value(vs)?)
+        }
         NetKind::Rendering => (
             serde_json::to_value(nets::score_rendering(&net, data, pairs, held, &dev)?.0)?,
             serde_json::to_value(nets::score_rendering(&net, data, pairs, val, &dev)?.0)?,
@@ -368,6 +419,7 @@ fn score_only(
         "image": [pairs.rows, pairs.cols],
         "held_out": h,
         "validation": v,
+        "surface_force": force,
     });
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     std::fs::write(
@@ -395,8 +447,25 @@ fn perceive_real(
     let fitted = real::OpticsFile::read(map_json)?;
     let frames = real::load_frames(&digit.join("real-frames-edge6"), "edge6")?;
     let (land, _, _) = pairs::image_map(gel, 1);
+    let recolour = match &a.recolour_fem {
+        Some(dir) => {
+            let fields = real::read_cached_steps(dir, 100, gel.num_nodes()).with_context(|| {
+                format!(
+                    "{} does not hold the 100 edge6 steps u_001.npy .. u_100.npy of this mesh",
+                    dir.display()
+                )
+            })?;
+            let even: Vec<usize> = (1..frames.len()).filter(|k| k % 2 == 0).collect();
+            let renderer = real::default_renderer(digit)?;
+            Some(real_frames::fit_recolour(
+                gel, &fields, &frames, &fitted, &renderer, &even,
+            )?)
+        }
+        None => None,
+    };
     let opts = RealOptions {
         uncolour: a.uncolour,
+        recolour,
         remove_drift: !a.keep_drift,
         ..RealOptions::default()
     };
@@ -451,6 +520,7 @@ fn perceive_real(
         "checkpoint": a.checkpoint.display().to_string(),
         "map": map_json.display().to_string(),
         "uncolour": a.uncolour,
+        "recolour": recolour,
         "remove_drift": !a.keep_drift,
         "image": [cfg.rows, cfg.cols],
         "all_frames": summary(false),

@@ -33,9 +33,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if args.iter().any(|a| a == "--compare") {
         let t0 = std::time::Instant::now();
         let c = ocm_ident::softarm::dynamic_comparison(&rec)?;
+        let variant = match c.actuator_lag_s {
+            Some(lag) => format!("actuator terms through Laguerre filters of {lag:.3} s"),
+            None => "stiffening in the loop".into(),
+        };
         println!(
             "held-out (val) RMSE: static map {:.4}, linear state-space (order {}) {:.4}, \
-             extended (nonlinearity) {:.4}: {:.1} % below the linear-dynamic baseline ({:.1} s)",
+             extended (nonlinearity: {variant}) {:.4}: {:.1} % below the linear-dynamic \
+             baseline ({:.1} s)",
             c.static_rmse,
             c.order,
             c.linear_rmse,

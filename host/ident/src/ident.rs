@@ -360,7 +360,18 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         baseline: baseline.describe(),
         baseline_params,
         dynamic_baseline_rmse,
-        extensions: named.iter().map(|c| c.extension().to_string()).collect(),
+        extensions: named
+            .iter()
+            .map(|c| match (c, sel.extended.actuator_lag_s) {
+                (Cause::Nonlinearity, Some(lag)) => format!(
+                    "actuator nonlinearity with dynamics of its own: each quadratic and cubic \
+                     term of the inputs through {} Laguerre filters (time constant {lag:.3} s), \
+                     beside the linear state-space model",
+                    crate::extension::LAGUERRE_FILTERS
+                ),
+                _ => c.extension().to_string(),
+            })
+            .collect(),
         extension_params: sel
             .extended
             .params

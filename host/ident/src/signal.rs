@@ -33,6 +33,42 @@ pub fn lowpass(x: &[f64], time_s: &[f64], starts: &[usize], tau_s: f64) -> Vec<f
     y
 }
 
+/// Discrete Laguerre filters of `x` with pole `pole` in (0, 1): the first is the lag
+/// `sqrt(1 - a^2) / (1 - a q^-1)`, each next one the previous passed through the all-pass
+/// `(q^-1 - a) / (1 - a q^-1)`. The functions are orthonormal (for white input), so a
+/// combination of `count` of them is a finite memory of about `count (1 + a) / (1 - a)`
+/// samples whose coefficients stay well conditioned, unlike a bank of neighbouring lags. Each
+/// segment starts in the steady state of its first value (every all-pass has unit DC gain).
+pub fn laguerre(x: &[f64], starts: &[usize], pole: f64, count: usize) -> Vec<Vec<f64>> {
+    let a = pole;
+    let g = (1.0 - a * a).sqrt();
+    let mut out = vec![vec![0.0; x.len()]; count];
+    for (s, e) in segments(starts, x.len()) {
+        let steady = g * x[s] / (1.0 - a);
+        // previous input and output of each stage (stage 0 is the lag)
+        let mut prev_in = vec![x[s]; count];
+        let mut prev_out = vec![steady; count];
+        for k in 1..count {
+            prev_in[k] = steady;
+        }
+        for i in s..e {
+            let mut v = x[i];
+            for k in 0..count {
+                let y = if k == 0 {
+                    a * prev_out[0] + g * v
+                } else {
+                    a * prev_out[k] + prev_in[k] - a * v
+                };
+                prev_in[k] = v;
+                prev_out[k] = y;
+                out[k][i] = y;
+                v = y;
+            }
+        }
+    }
+    out
+}
+
 /// Dead time of `delay` samples: each row takes the value `delay` rows earlier in its segment
 /// (the first value is held at the segment start).
 pub fn delay_samples(x: &[f64], starts: &[usize], delay: usize) -> Vec<f64> {
@@ -199,6 +235,32 @@ pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn laguerre_impulse_responses_are_orthonormal_and_hold_a_constant() {
+        // The discrete Laguerre functions are orthonormal in l2: the Gram matrix of the
+        // impulse responses is the identity.
+        let (pole, count) = (0.8, 6);
+        let mut x = vec![0.0; 400];
+        x[1] = 1.0;
+        let l = laguerre(&x, &[0], pole, count);
+        for j in 0..count {
+            for k in 0..count {
+                let g: f64 = l[j].iter().zip(&l[k]).map(|(a, b)| a * b).sum();
+                let want = if j == k { 1.0 } else { 0.0 };
+                assert!((g - want).abs() < 1e-9, "<l{j}, l{k}> = {g}");
+            }
+        }
+        // a constant input starts (and stays) in the steady state, per segment
+        let c = [2.0, 2.0, 2.0, -1.0, -1.0];
+        let l = laguerre(&c, &[0, 3], pole, count);
+        let dc = (1.0 - pole * pole).sqrt() / (1.0 - pole);
+        for f in &l {
+            for (v, x) in f.iter().zip(&c) {
+                assert!((v - dc * x).abs() < 1e-12, "{v} vs {}", dc * x);
+            }
+        }
+    }
 
     #[test]
     fn lowpass_step_response_matches_exponential() {

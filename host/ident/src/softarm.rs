@@ -123,8 +123,9 @@ pub fn load(path: &Path) -> Result<Record, IdentError> {
 }
 
 /// The soft arm against its linear-dynamic baseline: held-out (`val`) RMSE of the static map,
-/// of the linear state-space model, and of that model with the `nonlinearity` extension
-/// (stiffening inside the dynamics, refined in the loop), all free-run.
+/// of the linear state-space model, and of that model with the `nonlinearity` extension (the
+/// better on training rows of its two variants, see [`crate::extension::Prepared::fit_set`]),
+/// all free-run.
 #[derive(Debug, Clone, Copy)]
 pub struct DynamicComparison {
     /// Order of the state-space model chosen by its criterion.
@@ -137,6 +138,9 @@ pub struct DynamicComparison {
     pub extended_rmse: f64,
     /// `100 (1 - extended / linear)`.
     pub gain_pct: f64,
+    /// Time constant (s) of the Laguerre filters when the extension kept is the actuator
+    /// variant (each nonlinear input term with dynamics of its own); `None` for stiffening.
+    pub actuator_lag_s: Option<f64>,
 }
 
 /// Fits the static map, the linear state-space model and its nonlinear extension on the
@@ -175,6 +179,7 @@ pub fn dynamic_comparison(rec: &Record) -> Result<DynamicComparison, IdentError>
         linear_rmse,
         extended_rmse,
         gain_pct: 100.0 * (1.0 - extended_rmse / linear_rmse),
+        actuator_lag_s: ext.actuator_lag_s,
     })
 }
 

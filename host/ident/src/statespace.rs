@@ -13,6 +13,7 @@
 //! starts at rest for its first input and never sees a measured output.
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 use crate::signal;
 
@@ -364,18 +365,21 @@ impl FitContext<'_> {
         let np = theta.len();
         let mut lambda = 1e-3;
         for _ in 0..LM_ITERATIONS {
-            // Jacobian of the residuals, column by column
-            let mut jac: Vec<Vec<f64>> = Vec::with_capacity(np);
-            for j in 0..np {
-                let h = 1e-6 * theta[j].abs().max(1e-2);
-                let mut t = theta.clone();
-                t[j] += h;
-                let (ta, tb) = unpack(&t);
-                match self.residuals(&ta, &tb) {
-                    Some(rj) => jac.push(rj.iter().zip(&r).map(|(p, q)| (q - p) / h).collect()),
-                    None => jac.push(vec![0.0; r.len()]),
-                }
-            }
+            // Jacobian of the residuals, column by column: one simulation per parameter,
+            // independent of the others, so computed in parallel (landing in order)
+            let jac: Vec<Vec<f64>> = (0..np)
+                .into_par_iter()
+                .map(|j| {
+                    let h = 1e-6 * theta[j].abs().max(1e-2);
+                    let mut t = theta.clone();
+                    t[j] += h;
+                    let (ta, tb) = unpack(&t);
+                    match self.residuals(&ta, &tb) {
+                        Some(rj) => rj.iter().zip(&r).map(|(p, q)| (q - p) / h).collect(),
+                        None => vec![0.0; r.len()],
+                    }
+                })
+                .collect();
             // normal equations of J dtheta = r (jac holds -dr/dtheta)
             let mut jtj = DMatrix::<f64>::zeros(np, np);
             let mut jtr = DVector::<f64>::zeros(np);

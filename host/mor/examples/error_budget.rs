@@ -17,7 +17,11 @@
 //! in three bands of the full model's TCP speed. MOR_MODES=m appends the full model's m lowest
 //! rest modes to each POD basis (`ocm_mor::modes`); the printed rank is then POD rank + m.
 //! MOR_HELD=k keeps the first k held-out sequences only; MOR_PLATE=f adds the rigid top frame's
-//! elements at f times their stiffness (`ReducedModel::galerkin_with_body_penalty`).
+//! elements at f times their stiffness (`ReducedModel::galerkin_with_body_penalty`); MOR_PG
+//! replaces Galerkin by Petrov-Galerkin with the test basis J0^-1 V
+//! (`ocm_mor::modes::step_test_basis`, `ReducedModel::petrov_galerkin`); MOR_STEPRESP=m appends
+//! the first m POD modes of the full model's step responses to unit chamber pressures at
+//! training states.
 use nalgebra::{DMatrix, DVector};
 use ocm_fem::bellows::{Bellows, BellowsConfig};
 use ocm_mor::curve::projected_tcp_rmse_mm;
@@ -215,6 +219,77 @@ fn main() -> ocm_mor::Result<()> {
         }
         _ => None,
     };
+    // MOR_STEPRESP=m: also the first m POD modes of the full model's step responses
+    // J(u)^-1 f_c(u) to a unit pressure in each chamber c at every 80th training state u (J the
+    // backward-Euler step matrix with the tangent there at zero pressure), each normalised.
+    let stepresp = match std::env::var("MOR_STEPRESP")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+    {
+        Some(m) if m > 0 => {
+            let t0 = std::time::Instant::now();
+            let pat = ocm_fem::model::Pattern::new(&b.model)?;
+            let nc = b.model.cavities.len();
+            let mut cols: Vec<Vec<f64>> = vec![];
+            for j in (0..s.train_rows()).step_by(80) {
+                let x: Vec<f64> = (0..n)
+                    .map(|d| b.model.rest[d / 3][d % 3] + train[(d, j)])
+                    .collect();
+                let ext = |p: Vec<f64>| -> ocm_mor::Result<Vec<f64>> {
+                    Ok(b.model
+                        .evaluate(
+                            &pat,
+                            &x,
+                            &ocm_fem::model::Loads { pressures_pa: p },
+                            1.0,
+                            false,
+                        )?
+                        .f_ext)
+                };
+                let f0 = ext(vec![0.0; nc])?;
+                let mut loads = DMatrix::<f64>::zeros(n, nc);
+                for c in 0..nc {
+                    let mut p = vec![0.0; nc];
+                    p[c] = 1.0;
+                    let fc = ext(p)?;
+                    for d in 0..n {
+                        loads[(d, c)] = fc[d] - f0[d];
+                    }
+                }
+                let resp = ocm_mor::modes::step_test_basis_at(
+                    &b.model,
+                    &loads,
+                    drive.dt_s,
+                    &x,
+                    &vec![0.0; nc],
+                )?;
+                for c in 0..nc {
+                    let col = resp.column(c);
+                    let nrm = col.norm();
+                    if nrm > 0.0 {
+                        cols.push(col.iter().map(|v| v / nrm).collect());
+                    }
+                }
+            }
+            let a = faer::Mat::<f64>::from_fn(n, cols.len(), |i, j| cols[j][i]);
+            let pr = pod(
+                a.as_ref(),
+                &PodOptions {
+                    truncation: Truncation::Rank(m.min(cols.len())),
+                    ..PodOptions::default()
+                },
+            )?;
+            eprintln!(
+                "step responses: {} columns, {:.1} s",
+                cols.len(),
+                t0.elapsed().as_secs_f64()
+            );
+            Some(DMatrix::from_fn(n, pr.modes.ncols(), |i, j| {
+                pr.modes[(i, j)]
+            }))
+        }
+        _ => None,
+    };
     drop(train);
     let rest = match std::env::var("MOR_MODES")
         .ok()
@@ -255,13 +330,24 @@ fn main() -> ocm_mor::Result<()> {
             Some(w) => ocm_mor::modes::enrich(&v, w, 1e-8)?,
             None => v,
         };
+        let v = match &stepresp {
+            Some(w) => ocm_mor::modes::enrich(&v, w, 1e-8)?,
+            None => v,
+        };
         let r = v.ncols();
         eprintln!("basis rank {r}");
         // MOR_PLATE=f: the rigid top frame's own elements resist non-rigid motion at f times
         // their stiffness.
         let plate: Option<f64> = std::env::var("MOR_PLATE").ok().and_then(|v| v.parse().ok());
-        let gal =
-            ReducedModel::galerkin_with_body_penalty(&b.model, v.clone(), &b.top_face, plate)?;
+        // MOR_PG: Petrov-Galerkin with the test basis J0^-1 V (the step matrix at rest).
+        let gal = if std::env::var("MOR_PG").is_ok() {
+            let t0 = std::time::Instant::now();
+            let w = ocm_mor::modes::step_test_basis(&b.model, &v, h)?;
+            eprintln!("test basis: {:.2} s", t0.elapsed().as_secs_f64());
+            ReducedModel::petrov_galerkin(&b.model, v.clone(), w, &b.top_face)?
+        } else {
+            ReducedModel::galerkin_with_body_penalty(&b.model, v.clone(), &b.top_face, plate)?
+        };
         let rp = ReducedProbe::new(probe.clone(), &gal);
         let tcp0 = rp.compact_state(&DVector::zeros(r), &DVector::zeros(r));
         let floor = projected_tcp_rmse_mm(&s, &v, &rp, &held)?;

@@ -1,7 +1,8 @@
 //! One-step consistency of the Galerkin reduced model against the full FEM around the input
 //! jumps of a held-out sequence: `cargo run --release -p ocm-mor --example one_step -- S RANK [SEQ]`
 //! (S a snapshot folder of `ocm mor snapshots`; SEQ the sequence index, default the first held-out
-//! one).
+//! one). MOR_PG=1: the Petrov-Galerkin model with the test basis J0^-1 V (J0 the step matrix at
+//! rest) instead; MOR_PG=2: with the step matrix at each start state (a full factorisation each).
 //!
 //! The full model runs the sequence; the reduced model (plain Galerkin, rtol 1e-10, damping tangent
 //! at every step start) starts from the projected full state of step j (q = V^T u, backward-Euler
@@ -42,7 +43,13 @@ fn main() -> ocm_mor::Result<()> {
     drop(train);
     let n = s.disp.cols;
     let v = DMatrix::from_fn(n, r, |i, j| p.modes[(i, j)]);
-    let mut rom = ReducedModel::galerkin(&b.model, v.clone(), &b.top_face)?;
+    // MOR_PG: Petrov-Galerkin with the test basis J0^-1 V instead of Galerkin.
+    let mut rom = if std::env::var("MOR_PG").is_ok() {
+        let w = ocm_mor::modes::step_test_basis(&b.model, &v, s.rec.dt_s)?;
+        ReducedModel::petrov_galerkin(&b.model, v.clone(), w, &b.top_face)?
+    } else {
+        ReducedModel::galerkin(&b.model, v.clone(), &b.top_face)?
+    };
     rom.rtol = 1e-10;
     rom.damping_tangent_age = 1;
     let probe = XsProbe::of_bellows(&b);
@@ -79,6 +86,27 @@ fn main() -> ocm_mor::Result<()> {
         let mut rs = rom.rest_state();
         rs.v = (&q0 - q_of(&states[start - 1])) / h;
         rs.q = q0.clone();
+        // MOR_PG=2: the test basis of the step matrix at the start state itself (an oracle: a
+        // sparse factorisation per step).
+        let local;
+        let rom = if std::env::var("MOR_PG").is_ok_and(|v| v == "2") {
+            let x: Vec<f64> = (0..n)
+                .map(|d| b.model.rest[d / 3][d % 3] + (&v * &q0)[d])
+                .collect();
+            let p: Vec<f64> = inputs[start + 1]
+                .pressure_kpa
+                .iter()
+                .map(|p| p * 1e3)
+                .collect();
+            let w = ocm_mor::modes::step_test_basis_at(&b.model, &v, h, &x, &p)?;
+            let mut m = ReducedModel::petrov_galerkin(&b.model, v.clone(), w, &b.top_face)?;
+            m.rtol = 1e-10;
+            m.damping_tangent_age = 1;
+            local = m;
+            &local
+        } else {
+            &rom
+        };
         let mut line = format!("from step {start}:");
         let mut qn = q0;
         for k in 1..=3 {

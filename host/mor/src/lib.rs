@@ -6,7 +6,7 @@
 //! [`nnls`], reduced statics and implicit dynamics) -> [`xs`] (X_S of a full or reduced state) ->
 //! [`dataset`] (NPY + JSON manifest, shards). [`store`] keeps bases and reduced models on disk with
 //! their hashes. [`weighted`] is the stiffness-weighted POD and [`modes`] the full model's rest
-//! modes and static load shapes for basis enrichment (both measured, neither better for the
+//! modes, static load shapes and Petrov-Galerkin test bases (all measured, none better for the
 //! bellows: see the README's error budget).
 
 #![allow(clippy::needless_range_loop)]

@@ -80,10 +80,32 @@ struct RestOperator<'a> {
 
 impl<'a> RestOperator<'a> {
     fn new(model: &'a Model) -> Result<Self> {
+        Self::shifted(model, 0.0, 1.0)
+    }
+
+    /// The operator whose factor is `mass_coeff` M + `stiffness_coeff` K (K at rest).
+    fn shifted(model: &'a Model, mass_coeff: f64, stiffness_coeff: f64) -> Result<Self> {
+        let pressures = vec![0.0; model.cavities.len()];
+        Self::shifted_at(
+            model,
+            model.rest_dofs(),
+            &pressures,
+            mass_coeff,
+            stiffness_coeff,
+        )
+    }
+
+    /// [`Self::shifted`] with K the tangent (internal minus pressure load) at positions `x0`.
+    fn shifted_at(
+        model: &'a Model,
+        x0: Vec<f64>,
+        pressures_pa: &[f64],
+        mass_coeff: f64,
+        stiffness_coeff: f64,
+    ) -> Result<Self> {
         let pat = Pattern::new(model)?;
-        let x0 = model.rest_dofs();
         let loads = Loads {
-            pressures_pa: vec![0.0; model.cavities.len()],
+            pressures_pa: pressures_pa.to_vec(),
         };
         let kv = model
             .evaluate(&pat, &x0, &loads, 1.0, true)?
@@ -92,7 +114,16 @@ impl<'a> RestOperator<'a> {
         let mv = model.mass_values(&pat);
         let mut solver =
             SparseSolver::new(pat.num_free(), pat.col_ptr.clone(), pat.row_idx.clone());
-        solver.factorize(&kv)?;
+        if mass_coeff == 0.0 && stiffness_coeff == 1.0 {
+            solver.factorize(&kv)?;
+        } else {
+            let jv: Vec<f64> = kv
+                .iter()
+                .zip(&mv)
+                .map(|(k, m)| stiffness_coeff * k + mass_coeff * m)
+                .collect();
+            solver.factorize(&jv)?;
+        }
         Ok(RestOperator {
             model,
             pat,
@@ -103,7 +134,7 @@ impl<'a> RestOperator<'a> {
         })
     }
 
-    /// Nodal displacements of reduced coordinates `z` (rigid bodies: v + theta x r at rest).
+    /// Nodal displacements of reduced coordinates `z` (rigid bodies: v + theta x r at `x0`).
     fn to_full(&self, z: &[f64]) -> Vec<f64> {
         let mut u = vec![0.0; self.x0.len()];
         for (j, &d) in self.pat.dof_of.iter().enumerate() {
@@ -114,7 +145,8 @@ impl<'a> RestOperator<'a> {
             let v = Vector3::new(z[bd.first], z[bd.first + 1], z[bd.first + 2]);
             let th = Vector3::new(z[bd.first + 3], z[bd.first + 4], z[bd.first + 5]);
             for &i in &self.model.rigid_bodies[bd.body].nodes {
-                let ui = v + th.cross(&(self.model.rest[i] - c));
+                let xi = Vector3::new(self.x0[3 * i], self.x0[3 * i + 1], self.x0[3 * i + 2]);
+                let ui = v + th.cross(&(xi - c));
                 u[3 * i..3 * i + 3].copy_from_slice(ui.as_slice());
             }
         }
@@ -227,6 +259,69 @@ pub fn static_shapes(model: &Model, tip_nodes: &[usize]) -> Result<DMatrix<f64>>
         out.set_column(nc + d, &DVector::from_vec(op.static_response(&f)?));
     }
     Ok(out)
+}
+
+/// The Petrov-Galerkin test basis W = T J0^-1 T^T V of a basis V (3N x r) for backward-Euler
+/// steps of `h` seconds: J0 = (1/h^2 + alpha/h) M + (1 + beta/h) K0 is the full model's step
+/// matrix at rest on the solver's reduced DOFs (T: free nodes plus the rigid bodies' linearised
+/// motion). For a linear step with this matrix, W^T R(V q) = V^T T J0^-1 T^T J0 T (z_q - z*) is
+/// the Euclidean projection of the step's error, so the reduced step returns the projection of
+/// the full one; it is the frozen-Jacobian form of least-squares Petrov-Galerkin in the norm
+/// ||J0^-1 R||. The columns are scaled by one common factor so that ||W||_F = ||V||_F (the
+/// equations' solution does not depend on it).
+pub fn step_test_basis(model: &Model, basis: &DMatrix<f64>, h: f64) -> Result<DMatrix<f64>> {
+    let pressures = vec![0.0; model.cavities.len()];
+    step_test_basis_at(model, basis, h, &model.rest_dofs(), &pressures)
+}
+
+/// [`step_test_basis`] with the step matrix at nodal positions `x` (3N) under cavity pressures
+/// `pressures_pa` (the tangent there, pressure load included, and T linearised there).
+pub fn step_test_basis_at(
+    model: &Model,
+    basis: &DMatrix<f64>,
+    h: f64,
+    x: &[f64],
+    pressures_pa: &[f64],
+) -> Result<DMatrix<f64>> {
+    if !(h.is_finite() && h > 0.0) {
+        return Err(MorError::Invalid(format!(
+            "time step must be positive and finite, got {h}"
+        )));
+    }
+    let n3 = 3 * model.num_nodes();
+    if basis.nrows() != n3 {
+        return Err(MorError::Invalid(format!(
+            "basis has {} rows, the model {n3} DOFs",
+            basis.nrows()
+        )));
+    }
+    if x.len() != n3 || pressures_pa.len() != model.cavities.len() {
+        return Err(MorError::Invalid(format!(
+            "state has {} DOFs and {} pressures, the model {n3} and {}",
+            x.len(),
+            pressures_pa.len(),
+            model.cavities.len()
+        )));
+    }
+    let op = RestOperator::shifted_at(
+        model,
+        x.to_vec(),
+        pressures_pa,
+        1.0 / (h * h) + model.rayleigh_alpha / h,
+        1.0 + model.rayleigh_beta / h,
+    )?;
+    let mut w = DMatrix::<f64>::zeros(n3, basis.ncols());
+    for k in 0..basis.ncols() {
+        w.set_column(
+            k,
+            &DVector::from_vec(op.static_response(basis.column(k).as_slice())?),
+        );
+    }
+    let (nv, nw) = (basis.norm(), w.norm());
+    if nw > 0.0 && nw.is_finite() {
+        w *= nv / nw;
+    }
+    Ok(w)
 }
 
 /// Appends the columns of `extra` to the orthonormal `basis` (3N x r), each orthonormalised

@@ -10,6 +10,7 @@
 //! then depends on r and the sampled elements only, not on the mesh. Constraints: the clamped DOFs
 //! are zero in every snapshot and hence in V, so the constraint forces H^T lambda vanish under the
 //! projection; the rigid parts follow the span of the snapshots (rigid to first order).
+//! [`ReducedModel::petrov_galerkin`] tests the same equations with another basis W instead of V.
 
 use crate::drive::Input;
 use crate::nnls;
@@ -61,6 +62,15 @@ pub struct ReducedElement {
     rest: [Vector3<f64>; 4],
     /// Basis rows of the element's 12 DOFs, 12 x r column-major.
     v: Vec<f64>,
+    /// Test-basis rows of the same DOFs (Petrov-Galerkin), 12 x r; `None`: the basis rows.
+    t: Option<Vec<f64>>,
+}
+
+impl ReducedElement {
+    /// Rows of the test basis the element's force is projected on.
+    fn test_rows(&self) -> &[f64] {
+        self.t.as_deref().unwrap_or(&self.v)
+    }
 }
 
 /// The projected follower-pressure load of one cavity per pascal: G(q)_k = g0_k + L_kj q_j +
@@ -110,6 +120,9 @@ pub struct ReducedStepReport {
 pub struct ReducedModel {
     /// The basis, 3N x r.
     pub basis: DMatrix<f64>,
+    /// The test basis W (3N x r) of a Petrov-Galerkin model, whose equations are W^T R(V q) = 0;
+    /// `None` for Galerkin (W = V).
+    pub test: Option<DMatrix<f64>>,
     /// M_r.
     pub mass: DMatrix<f64>,
     /// Elements of the force sum.
@@ -215,6 +228,43 @@ impl ReducedModel {
         tip_nodes: &[usize],
         penalty: Option<f64>,
     ) -> Result<Self> {
+        Self::project(model, basis, None, tip_nodes, penalty)
+    }
+
+    /// Petrov-Galerkin projection: the trial basis `basis` (u = V q) with the equations tested
+    /// by `test` (W^T R(V q) = 0, both 3N x r). Mass W^T M V, forces W^T f, loads W^T g; the
+    /// matrices are no longer symmetric. With W = J0^-1 V ([`crate::modes::step_test_basis`])
+    /// a linear step returns the Euclidean projection of the full step (crate README).
+    pub fn petrov_galerkin(
+        model: &Model,
+        basis: DMatrix<f64>,
+        test: DMatrix<f64>,
+        tip_nodes: &[usize],
+    ) -> Result<Self> {
+        if test.shape() != basis.shape() {
+            return Err(MorError::Invalid(format!(
+                "test basis is {} x {}, the basis {} x {}",
+                test.nrows(),
+                test.ncols(),
+                basis.nrows(),
+                basis.ncols()
+            )));
+        }
+        if test.iter().any(|x| !x.is_finite()) {
+            return Err(MorError::Invalid(
+                "test basis holds a non-finite value".into(),
+            ));
+        }
+        Self::project(model, basis, Some(test), tip_nodes, None)
+    }
+
+    fn project(
+        model: &Model,
+        basis: DMatrix<f64>,
+        test: Option<DMatrix<f64>>,
+        tip_nodes: &[usize],
+        penalty: Option<f64>,
+    ) -> Result<Self> {
         let n3 = 3 * model.num_nodes();
         if let Some(p) = penalty
             && !(p.is_finite() && p > 0.0)
@@ -234,16 +284,17 @@ impl ReducedModel {
             return Err(MorError::Invalid("no tip nodes for the tip force".into()));
         }
         let r = basis.ncols();
+        let w = test.as_ref().unwrap_or(&basis);
         let masses = model.nodal_masses();
         let mut mass = DMatrix::zeros(r, r);
         for d in 0..n3 {
             let m = masses[d / 3];
-            let row = basis.row(d);
+            let (row, wrow) = (basis.row(d), w.row(d));
             for j in 0..r {
                 let mj = m * row[j];
                 if mj != 0.0 {
                     for i in 0..r {
-                        mass[(i, j)] += row[i] * mj;
+                        mass[(i, j)] += wrow[i] * mj;
                     }
                 }
             }
@@ -262,14 +313,17 @@ impl ReducedModel {
                 let g = &model.elements[e];
                 let mut geom = g.clone();
                 geom.nodes = [0, 1, 2, 3];
-                let mut v = vec![0.0; 12 * r];
-                for k in 0..r {
-                    for a in 0..4 {
-                        for d in 0..3 {
-                            v[k * 12 + 3 * a + d] = rows3(&basis, g.nodes[a], d, k);
+                let rows = |m: &DMatrix<f64>| {
+                    let mut v = vec![0.0; 12 * r];
+                    for k in 0..r {
+                        for a in 0..4 {
+                            for d in 0..3 {
+                                v[k * 12 + 3 * a + d] = rows3(m, g.nodes[a], d, k);
+                            }
                         }
                     }
-                }
+                    v
+                };
                 ReducedElement {
                     element: e,
                     weight: 1.0,
@@ -277,20 +331,21 @@ impl ReducedModel {
                     k0: model.element_k0(e).cloned(),
                     scale: factor * model.element_scale[e],
                     rest: g.nodes.map(|i| model.rest[i]),
-                    v,
+                    v: rows(&basis),
+                    t: test.as_ref().map(rows),
                 }
             })
             .collect();
         let pressure = model
             .cavities
             .iter()
-            .map(|c| pressure_form(model, &basis, &c.triangles))
+            .map(|c| pressure_form(model, &basis, w, &c.triangles))
             .collect();
         let mut tip = DMatrix::zeros(r, 3);
         for &i in tip_nodes {
             for d in 0..3 {
                 for k in 0..r {
-                    tip[(k, d)] += rows3(&basis, i, d, k) / tip_nodes.len() as f64;
+                    tip[(k, d)] += rows3(w, i, d, k) / tip_nodes.len() as f64;
                 }
             }
         }
@@ -298,7 +353,7 @@ impl ReducedModel {
         for (i, m) in masses.iter().enumerate() {
             for d in 0..3 {
                 for k in 0..r {
-                    gravity[k] += rows3(&basis, i, d, k) * m * model.gravity[d];
+                    gravity[k] += rows3(w, i, d, k) * m * model.gravity[d];
                 }
             }
         }
@@ -306,12 +361,13 @@ impl ReducedModel {
         for (i, f) in &model.point_forces {
             for d in 0..3 {
                 for k in 0..r {
-                    gravity[k] += rows3(&basis, *i, d, k) * f[d];
+                    gravity[k] += rows3(w, *i, d, k) * f[d];
                 }
             }
         }
         Ok(ReducedModel {
             basis,
+            test,
             mass,
             elements,
             pressure,
@@ -360,8 +416,9 @@ impl ReducedModel {
             )?;
             let w = el.weight;
             energy += w * ev.energy;
+            let tr = el.test_rows();
             for kk in 0..r {
-                let col = &el.v[kk * 12..kk * 12 + 12];
+                let col = &tr[kk * 12..kk * 12 + 12];
                 f[kk] += w * (0..12).map(|i| col[i] * ev.force[i]).sum::<f64>();
             }
             if let (Some(km), Some(ke)) = (k.as_mut(), ev.stiffness.as_ref()) {
@@ -375,7 +432,7 @@ impl ReducedModel {
                 for j in 0..r {
                     let kcol = &kv[j * 12..j * 12 + 12];
                     for i in 0..r {
-                        let col = &el.v[i * 12..i * 12 + 12];
+                        let col = &tr[i * 12..i * 12 + 12];
                         km[(i, j)] += w * (0..12).map(|m| col[m] * kcol[m]).sum::<f64>();
                     }
                 }
@@ -480,7 +537,8 @@ impl ReducedModel {
         }
     }
 
-    /// Total energy: kinetic 1/2 q'^T M_r q' plus strain energy, J.
+    /// Total energy: kinetic 1/2 q'^T M_r q' plus strain energy, J (a Galerkin model's; for a
+    /// Petrov-Galerkin one M_r and the forces are tested with W and this is not the energy).
     pub fn energy(&self, s: &ReducedState) -> Result<f64> {
         let ke = 0.5 * s.v.dot(&(&self.mass * &s.v));
         Ok(ke + self.internal(&s.q, false)?.energy)
@@ -535,6 +593,7 @@ impl ReducedModel {
     fn shallow(&self) -> ReducedModel {
         ReducedModel {
             basis: DMatrix::zeros(0, self.rank()),
+            test: None,
             mass: DMatrix::zeros(0, 0),
             elements: vec![],
             pressure: vec![],
@@ -586,6 +645,7 @@ impl ReducedModel {
         let sol = nnls::solve(&g, rows, ne, &b, tolerance)?;
         let mut reduced = self.shallow();
         reduced.basis = self.basis.clone();
+        reduced.test = self.test.clone();
         reduced.mass = self.mass.clone();
         reduced.pressure = self.pressure.clone();
         reduced.tip = self.tip.clone();
@@ -639,7 +699,13 @@ pub struct EcswResult {
     pub skipped_configurations: usize,
 }
 
-fn pressure_form(model: &Model, basis: &DMatrix<f64>, tris: &[[usize; 3]]) -> PressureForm {
+/// The pressure load W^T g(V q) of one cavity per pascal (`test` is W, V for Galerkin).
+fn pressure_form(
+    model: &Model,
+    basis: &DMatrix<f64>,
+    test: &DMatrix<f64>,
+    tris: &[[usize; 3]],
+) -> PressureForm {
     let r = basis.ncols();
     let mut g0 = vec![0.0; r];
     let mut lin = vec![0.0; r * r];
@@ -651,13 +717,16 @@ fn pressure_form(model: &Model, basis: &DMatrix<f64>, tris: &[[usize; 3]]) -> Pr
             basis[(3 * i + 2, k)],
         )
     };
+    let tcol = |i: usize, k: usize| {
+        Vector3::new(test[(3 * i, k)], test[(3 * i + 1, k)], test[(3 * i + 2, k)])
+    };
     let mut cross = vec![Vector3::zeros(); r * r];
     for t in tris {
         let [a, b, c] = *t;
         let e1 = model.rest[b] - model.rest[a];
         let e2 = model.rest[c] - model.rest[a];
         let s: Vec<Vector3<f64>> = (0..r)
-            .map(|k| (col(a, k) + col(b, k) + col(c, k)) / 3.0)
+            .map(|k| (tcol(a, k) + tcol(b, k) + tcol(c, k)) / 3.0)
             .collect();
         let d1: Vec<Vector3<f64>> = (0..r).map(|k| col(b, k) - col(a, k)).collect();
         let d2: Vec<Vector3<f64>> = (0..r).map(|k| col(c, k) - col(a, k)).collect();
@@ -712,6 +781,8 @@ pub struct Stepper<'a> {
     integrator: Integrator,
     /// Basis rows of the sampled elements, 12 n_e x r (element c: rows 12c..12c+12).
     vall: faer::Mat<f64>,
+    /// Test-basis rows of the same (Petrov-Galerkin); `None`: `vall`.
+    tall: Option<faer::Mat<f64>>,
     /// Weighted element forces (or tangent times basis), 12 n_e x r scratch.
     kv: faer::Mat<f64>,
     /// Element displacements V q and weighted element forces, 12 n_e.
@@ -745,10 +816,16 @@ impl<'a> Stepper<'a> {
         let ne = rom.elements.len();
         let vall =
             faer::Mat::<f64>::from_fn(12 * ne, r, |i, k| rom.elements[i / 12].v[k * 12 + i % 12]);
+        let tall = rom.test.as_ref().map(|_| {
+            faer::Mat::<f64>::from_fn(12 * ne, r, |i, k| {
+                rom.elements[i / 12].test_rows()[k * 12 + i % 12]
+            })
+        });
         Stepper {
             rom,
             integrator,
             vall,
+            tall,
             kv: faer::Mat::zeros(12 * ne, r),
             u: faer::Mat::zeros(12 * ne, 1),
             fe: faer::Mat::zeros(12 * ne, 1),
@@ -904,15 +981,16 @@ impl<'a> Stepper<'a> {
             }
         }
         let fe = self.fe.col_as_slice(0);
+        let tall = self.tall.as_ref().unwrap_or(&self.vall);
         for k in 0..r {
-            self.f[k] = dot(self.vall.col_as_slice(k), fe);
+            self.f[k] = dot(tall.col_as_slice(k), fe);
         }
         if tangent {
             let mut k = faer::Mat::<f64>::zeros(r, r);
             matmul(
                 k.as_mut(),
                 Accum::Replace,
-                self.vall.transpose(),
+                tall.transpose(),
                 self.kv.as_ref(),
                 1.0,
                 Par::Seq,
@@ -1111,10 +1189,27 @@ mod tests {
                 ((i * 7 + k * 13) % 11) as f64 * 1e-3 - 5e-3
             }
         });
-        let rom = ReducedModel::galerkin(&model, basis, &[model.num_nodes() - 1]).unwrap();
+        let test = DMatrix::from_fn(n3, r, |i, k| {
+            if model.fixed[i] {
+                0.0
+            } else {
+                ((i * 5 + k * 3) % 7) as f64 * 1e-3 - 3e-3
+            }
+        });
+        let tip = [model.num_nodes() - 1];
+        for rom in [
+            ReducedModel::galerkin(&model, basis.clone(), &tip).unwrap(),
+            ReducedModel::petrov_galerkin(&model, basis.clone(), test.clone(), &tip).unwrap(),
+        ] {
+            sweep_matches_reference(&rom);
+        }
+    }
+
+    fn sweep_matches_reference(rom: &ReducedModel) {
+        let r = rom.rank();
         let q = DVector::from_fn(r, |i, _| 0.3 - 0.1 * i as f64);
         let reference = rom.internal(&q, true).unwrap();
-        let mut st = Stepper::new(&rom, Integrator::ImplicitEuler);
+        let mut st = Stepper::new(rom, Integrator::ImplicitEuler);
         let input = Input {
             pressure_kpa: [2.0, 0.0, 0.0],
             tip_force_n: [0.1, 0.0, -0.2],

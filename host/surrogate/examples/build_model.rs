@@ -25,7 +25,7 @@ fn main() {
         let t = std::time::Instant::now();
         let h = a.get(3).and_then(|x| x.parse::<usize>().ok()).unwrap_or(0);
         let p = SurrogateModel::calibration_pressures(n, 2);
-        let held = ocm_surrogate::fem_samples::random_pressures(h, 3);
+        let held = ocm_surrogate::force::nested_random_pressures(h, 3);
         let fs = m
             .calibrate_force(
                 &b,

@@ -78,10 +78,20 @@ pub struct BenchReport {
 
 /// Times the configured engine.
 pub fn run(chain: &ChainGeometry, limits: &Limits, cfg: &BenchConfig) -> Result<BenchReport> {
+    run_with_progress(chain, limits, cfg, |_| {})
+}
+
+/// [`run`], calling `on_repeat` with the count of finished repeats (progress bars).
+pub fn run_with_progress(
+    chain: &ChainGeometry,
+    limits: &Limits,
+    cfg: &BenchConfig,
+    mut on_repeat: impl FnMut(usize),
+) -> Result<BenchReport> {
     match cfg.engine {
-        Engine::Rapier => run_rapier(chain, limits, cfg),
-        Engine::Batch => run_batch(chain, limits, cfg, false),
-        Engine::BatchContact => run_batch(chain, limits, cfg, true),
+        Engine::Rapier => run_rapier(chain, limits, cfg, &mut on_repeat),
+        Engine::Batch => run_batch(chain, limits, cfg, false, &mut on_repeat),
+        Engine::BatchContact => run_batch(chain, limits, cfg, true, &mut on_repeat),
     }
 }
 
@@ -123,6 +133,7 @@ fn run_batch(
     limits: &Limits,
     cfg: &BenchConfig,
     contact: bool,
+    on_repeat: &mut dyn FnMut(usize),
 ) -> Result<BenchReport> {
     let pool = check(cfg)?;
     let mut scene = SceneConfig::default();
@@ -165,6 +176,7 @@ fn run_batch(
             })
         });
         rates.push((cfg.envs * cfg.steps) as f64 / t.elapsed().as_secs_f64());
+        on_repeat(rates.len());
     }
     let name = if contact {
         "batch with a plate (reduced coordinates, TCP penalty contact)"
@@ -176,7 +188,12 @@ fn run_batch(
 
 /// Steps `envs` rapier scenes (gravity, a plate 20 mm above the TCP at rest, position motors, a new
 /// projected command every step) on `threads` threads.
-fn run_rapier(chain: &ChainGeometry, limits: &Limits, cfg: &BenchConfig) -> Result<BenchReport> {
+fn run_rapier(
+    chain: &ChainGeometry,
+    limits: &Limits,
+    cfg: &BenchConfig,
+    on_repeat: &mut dyn FnMut(usize),
+) -> Result<BenchReport> {
     let pool = check(cfg)?;
     let surface = plate(chain, &SceneConfig::default());
     let mut envs: Vec<(Sim, rand_chacha::ChaCha8Rng, Posture)> = (0..cfg.envs)
@@ -215,6 +232,7 @@ fn run_rapier(chain: &ChainGeometry, limits: &Limits, cfg: &BenchConfig) -> Resu
             })
         });
         rates.push((cfg.envs * cfg.steps) as f64 / t.elapsed().as_secs_f64());
+        on_repeat(rates.len());
     }
     Ok(report(
         cfg,

@@ -177,7 +177,7 @@ pub fn fem_clamped_jig_forces(
 }
 
 /// Component-wise linear map F_fem,k = slope_k F_sur,k + offset_k.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ForceCalibration {
     /// Slopes per component.
     pub slope: [f64; 3],
@@ -199,6 +199,44 @@ pub struct ForceCalibration {
     /// How the surrogate was held on the jig.
     #[serde(default)]
     pub surrogate_hold: JigHold,
+    /// The fit's error over the pairs (fit and held-out) inside each of [`REPORT_RANGES_KPA`].
+    #[serde(default)]
+    pub by_range: Vec<RangeError>,
+}
+
+/// Nested pressure boxes over which the force fit's error is reported, kPa: the range the
+/// earlier point-load jig covered, a symmetric one, and the lab's whole range.
+pub const REPORT_RANGES_KPA: [[f64; 2]; 3] = [[-10.0, 10.0], [-20.0, 20.0], [-20.0, 35.0]];
+
+/// The calibrated fit's error over the pairs whose every chamber pressure lies in one range.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RangeError {
+    /// The range of every chamber's pressure, kPa.
+    pub range_kpa: [f64; 2],
+    /// Pairs inside it.
+    pub samples: usize,
+    /// RMSE per component of the calibrated surrogate force against the FEM's, N (zero when
+    /// there are no pairs).
+    pub rmse_n: [f64; 3],
+    /// Span (largest less smallest) per component of the FEM's force over those pairs, N.
+    pub fem_span_n: [f64; 3],
+    /// Held-out pairs (not used to fit) among them.
+    pub held_out_samples: usize,
+    /// RMSE per component over those held-out pairs alone, N (zero when there are none).
+    pub held_out_rmse_n: [f64; 3],
+}
+
+/// `n` seeded random pressure triples (kPa), the k-th uniform in `REPORT_RANGES_KPA[k % 3]`, so
+/// every reported range holds about a third of them (the held-out force pressures).
+pub fn nested_random_pressures(n: usize, seed: u64) -> Vec<[f64; 3]> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    (0..n)
+        .map(|k| {
+            let [lo, hi] = REPORT_RANGES_KPA[k % REPORT_RANGES_KPA.len()];
+            [0; 3].map(|_| rng.random_range(lo..hi))
+        })
+        .collect()
 }
 
 impl ForceCalibration {
@@ -252,7 +290,59 @@ impl ForceCalibration {
             held_out_rmse_n: [0.0; 3],
             held_out_samples: 0,
             surrogate_hold: JigHold::TcpPinned,
+            by_range: vec![],
         })
+    }
+
+    /// Records the fit's error over the pairs inside each of `ranges` (kPa; a pair is inside
+    /// when all three chamber pressures are); pairs from index `fit` on are the held-out ones.
+    pub fn set_range_errors(
+        &mut self,
+        pressures_kpa: &[[f64; 3]],
+        surrogate_n: &[[f64; 3]],
+        reference_n: &[[f64; 3]],
+        fit: usize,
+        ranges: &[[f64; 2]],
+    ) {
+        let rmse = |sur: &[[f64; 3]], fem: &[[f64; 3]]| {
+            if fem.is_empty() {
+                [0.0; 3]
+            } else {
+                self.rmse_on(sur, fem)
+            }
+        };
+        self.by_range = ranges
+            .iter()
+            .map(|&[lo, hi]| {
+                let inside: Vec<(bool, [f64; 3], [f64; 3])> = pressures_kpa
+                    .iter()
+                    .zip(surrogate_n.iter().zip(reference_n))
+                    .enumerate()
+                    .filter(|(_, (p, _))| p.iter().all(|&v| v >= lo && v <= hi))
+                    .map(|(i, (_, (s, f)))| (i >= fit, *s, *f))
+                    .collect();
+                let sur: Vec<[f64; 3]> = inside.iter().map(|t| t.1).collect();
+                let fem: Vec<[f64; 3]> = inside.iter().map(|t| t.2).collect();
+                let (hs, hf): (Vec<[f64; 3]>, Vec<[f64; 3]>) =
+                    inside.iter().filter(|t| t.0).map(|t| (t.1, t.2)).unzip();
+                let span = std::array::from_fn(|k| {
+                    let (a, b) = fem
+                        .iter()
+                        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), f| {
+                            (a.min(f[k]), b.max(f[k]))
+                        });
+                    if fem.is_empty() { 0.0 } else { b - a }
+                });
+                RangeError {
+                    range_kpa: [lo, hi],
+                    samples: fem.len(),
+                    rmse_n: rmse(&sur, &fem),
+                    fem_span_n: span,
+                    held_out_samples: hf.len(),
+                    held_out_rmse_n: rmse(&hs, &hf),
+                }
+            })
+            .collect();
     }
 
     /// RMSE per component of the calibrated surrogate force against reference forces, N.
@@ -329,6 +419,63 @@ mod tests {
         assert!(ForceCalibration::fit(&sur[..1], &fem[..1]).is_err());
         let flat = vec![[1.0, 2.0, 3.0]; 4];
         assert!(ForceCalibration::fit(&flat, &fem[..4]).is_err());
+    }
+
+    #[test]
+    fn range_errors_count_only_the_pairs_inside_each_range() {
+        // FEM = 2 x surrogate exactly inside -10..10 kPa, 1 N more in x outside it.
+        let p = [
+            [0.0, 5.0, -10.0],
+            [9.0, -3.0, 2.0],
+            [15.0, 0.0, 0.0],
+            [-20.0, 30.0, 35.0],
+        ];
+        let sur = [
+            [1.0, 2.0, 3.0],
+            [-1.0, 0.5, 4.0],
+            [2.0, 1.0, 1.0],
+            [3.0, -2.0, 5.0],
+        ];
+        let fem: Vec<[f64; 3]> = p
+            .iter()
+            .zip(&sur)
+            .map(|(p, s)| {
+                let off = if p.iter().all(|v: &f64| v.abs() <= 10.0) {
+                    0.0
+                } else {
+                    1.0
+                };
+                [2.0 * s[0] + off, 2.0 * s[1], 2.0 * s[2]]
+            })
+            .collect();
+        let mut c = ForceCalibration::fit(&sur[..2], &fem[..2]).unwrap();
+        c.set_range_errors(&p, &sur, &fem, 2, &REPORT_RANGES_KPA);
+        let r = &c.by_range;
+        assert_eq!(r.iter().map(|r| r.samples).collect::<Vec<_>>(), [2, 3, 4]);
+        assert_eq!(
+            r.iter().map(|r| r.held_out_samples).collect::<Vec<_>>(),
+            [0, 1, 2]
+        );
+        assert_eq!(r[0].held_out_rmse_n, [0.0; 3]);
+        assert!((r[1].held_out_rmse_n[0] - 1.0).abs() < 1e-12);
+        assert!(r[0].rmse_n.iter().all(|&e| e < 1e-12), "{r:?}");
+        assert!(
+            (r[0].fem_span_n[0] - 4.0).abs() < 1e-12 && (r[0].fem_span_n[2] - 2.0).abs() < 1e-12
+        );
+        assert!(
+            (r[1].rmse_n[0] - (1.0f64 / 3.0).sqrt()).abs() < 1e-12,
+            "{r:?}"
+        );
+        assert!((r[2].rmse_n[0] - 0.5f64.sqrt()).abs() < 1e-12 && r[2].rmse_n[1] < 1e-12);
+        c.set_range_errors(&p, &sur, &fem, 2, &[[20.0, 25.0]]);
+        assert_eq!(c.by_range[0].samples, 0);
+        assert_eq!(c.by_range[0].rmse_n, [0.0; 3]);
+        // The held-out draw fills every range in turn and stays inside it.
+        let h = nested_random_pressures(9, 3);
+        for (k, t) in h.iter().enumerate() {
+            let [lo, hi] = REPORT_RANGES_KPA[k % 3];
+            assert!(t.iter().all(|&v| v >= lo && v < hi), "{k}: {t:?}");
+        }
     }
 
     #[test]

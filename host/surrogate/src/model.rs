@@ -166,7 +166,8 @@ impl SurrogateModel {
 
     /// Measures both models on the jig (top plate clamped at the FEM's rest pose) at the fit and
     /// held-out pressure triples (kPa), stores the component-wise linear fit over the fit set
-    /// with its RMSE and R^2 there and its RMSE on the held-out set. The surrogate uses the motor
+    /// with its RMSE and R^2 there, its RMSE on the held-out set and, over both sets, its RMSE
+    /// inside each of [`crate::force::REPORT_RANGES_KPA`]. The surrogate uses the motor
     /// stiffness of `scene`, the posture f_SP(P) and is held as `hold` says
     /// ([`crate::force::JigHold::TcpPinned`] is the calibration's choice, see the README);
     /// `on_sample` counts finished pressures.
@@ -201,6 +202,7 @@ impl SurrogateModel {
         let nf = fit_kpa.len();
         let mut cal = ForceCalibration::fit(&sur[..nf], &fem[..nf])?;
         cal.set_held_out(&sur[nf..], &fem[nf..]);
+        cal.set_range_errors(&all, &sur, &fem, nf, &crate::force::REPORT_RANGES_KPA);
         cal.surrogate_hold = hold;
         self.force_calibration = Some(cal);
         Ok(ForceSamples {

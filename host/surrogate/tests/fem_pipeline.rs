@@ -75,7 +75,7 @@ fn surrogate_from_a_small_fem_sweep() {
     // pressures to fit, four held out.
     let mut m = m;
     let fit = SurrogateModel::calibration_pressures(4, 2);
-    let held = fem_samples::random_pressures(4, 3);
+    let held = ocm_surrogate::force::nested_random_pressures(4, 3);
     let fs = m
         .calibrate_force(
             &b,
@@ -103,6 +103,15 @@ fn surrogate_from_a_small_fem_sweep() {
         );
     }
     assert!(fit.contains(&[35.0; 3]) && fit.contains(&[-20.0; 3]));
+    // The error is reported per nested range; the whole range holds every pair.
+    let ranges: Vec<[f64; 2]> = c.by_range.iter().map(|r| r.range_kpa).collect();
+    assert_eq!(ranges, ocm_surrogate::force::REPORT_RANGES_KPA);
+    let whole = c.by_range[2];
+    assert_eq!((whole.samples, whole.held_out_samples), (16, 4));
+    for k in 0..3 {
+        assert!((whole.held_out_rmse_n[k] - c.held_out_rmse_n[k]).abs() < 1e-12);
+    }
+    assert!(c.by_range[0].held_out_samples >= 2 && c.by_range[1].held_out_samples >= 3);
     let _ = std::fs::remove_dir_all(&dir);
 }
 

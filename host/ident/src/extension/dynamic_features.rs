@@ -77,6 +77,10 @@ impl Prepared<'_> {
     /// The signals of `cause` inside the dynamics of channel `c`, with their names, or `None`
     /// when the cause acts at the output.
     pub(super) fn loop_signals(&self, cause: Cause, c: usize) -> Option<Vec<(LoopSignal, String)>> {
+        if cause == Cause::Nonlinearity && self.actuator_pole.get().is_some() {
+            // the actuator variant acts on the inputs, outside the loop (see `features`)
+            return None;
+        }
         let x = &self.channels[c].yhat;
         let name = &self.rec.outputs[c].name;
         let mut signals = Vec::new();

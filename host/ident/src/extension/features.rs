@@ -9,6 +9,9 @@ use crate::signal;
 /// Play-operator half-widths of the hysteresis extension, as fractions of the drive range.
 pub(super) const PLAY_WIDTHS: [f64; 6] = [0.005, 0.015, 0.035, 0.07, 0.14, 0.28];
 
+/// Laguerre filters per nonlinear input term in the actuator variant of `nonlinearity`.
+pub const LAGUERRE_FILTERS: usize = 8;
+
 /// Extension features of one channel: columns, names and non-negativity flags.
 pub type Features = (Vec<Vec<f64>>, Vec<String>, Vec<bool>);
 
@@ -295,32 +298,54 @@ impl Prepared<'_> {
                             .collect()
                     })
                     .collect();
+                // The actuator variant on a state-space baseline: each term of degree 2 and 3
+                // gets dynamics of its own, a combination of Laguerre filters (a Hammerstein
+                // branch per term beside the linear model; see `joint_fit`).
+                let pole = match self.baseline {
+                    Baseline::StateSpace(_) => self.actuator_pole.get(),
+                    _ => None,
+                };
+                let mut push = |col: Vec<f64>, name: String| match pole {
+                    Some(a) => {
+                        let lag = a.ln().recip().abs() * self.dt;
+                        let filtered =
+                            signal::laguerre(&col, &rec.segment_starts, a, LAGUERRE_FILTERS);
+                        for (j, f) in filtered.into_iter().enumerate() {
+                            cols.push(f);
+                            names.push(format!("{name} through Laguerre filter {j} ({lag:.3} s)"));
+                            nonneg.push(false);
+                        }
+                    }
+                    None => {
+                        cols.push(col);
+                        names.push(name);
+                        nonneg.push(false);
+                    }
+                };
                 // Complete polynomial up to degree 3 (the constant and linear terms keep the
                 // correction centred wherever the mismatch is), less the terms an affine
                 // baseline already has.
                 let affine = matches!(self.baseline, Baseline::Series | Baseline::StateSpace(_));
                 if !affine {
-                    cols.push(vec![1.0; n]);
-                    names.push("constant".into());
-                    nonneg.push(false);
+                    push(vec![1.0; n], "constant".into());
                 }
                 for a in 0..k_in {
                     if !affine {
-                        cols.push(z[a].clone());
-                        names.push(rec.inputs[a].name.clone());
-                        nonneg.push(false);
+                        push(z[a].clone(), rec.inputs[a].name.clone());
                     }
                     for b in a..k_in {
-                        cols.push((0..n).map(|i| z[a][i] * z[b][i]).collect());
-                        names.push(format!("{}*{}", rec.inputs[a].name, rec.inputs[b].name));
-                        nonneg.push(false);
+                        push(
+                            (0..n).map(|i| z[a][i] * z[b][i]).collect(),
+                            format!("{}*{}", rec.inputs[a].name, rec.inputs[b].name),
+                        );
                         for d in b..k_in {
-                            cols.push((0..n).map(|i| z[a][i] * z[b][i] * z[d][i]).collect());
-                            names.push(format!(
-                                "{}*{}*{}",
-                                rec.inputs[a].name, rec.inputs[b].name, rec.inputs[d].name
-                            ));
-                            nonneg.push(false);
+                            push(
+                                (0..n).map(|i| z[a][i] * z[b][i] * z[d][i]).collect(),
+                                format!(
+                                    "{}*{}*{}",
+                                    rec.inputs[a].name, rec.inputs[b].name, rec.inputs[d].name
+                                ),
+                            );
                         }
                     }
                 }

@@ -10,6 +10,6 @@ mod joint_fit;
 mod prepared;
 mod refined;
 
-pub use features::Features;
+pub use features::{Features, LAGUERRE_FILTERS};
 pub use joint_fit::SetFit;
 pub use prepared::{ChannelFit, Prepared, channel_scale};

@@ -59,6 +59,10 @@ pub struct Prepared<'a> {
     /// The cause whose most flexible variant is fitted (while a further cause is tested
     /// against it), if any.
     pub flexible: std::cell::Cell<Option<Cause>>,
+    /// While the actuator variant of `nonlinearity` on a state-space baseline is fitted: the
+    /// pole of the Laguerre filters that give each nonlinear input term its own dynamics (see
+    /// `joint_fit`); `None` for the stiffening variant and every other baseline.
+    pub actuator_pole: std::cell::Cell<Option<f64>>,
     /// In-loop refinements already done, per channel and set of causes (see `in_loop`): the
     /// selection fits the same sets repeatedly, and a larger set starts from a smaller one.
     pub(super) in_loop_cache: std::cell::RefCell<Vec<super::refined::Cached>>,
@@ -164,6 +168,7 @@ impl<'a> Prepared<'a> {
             means,
             latency_hint: std::cell::Cell::new(None),
             flexible: std::cell::Cell::new(None),
+            actuator_pole: std::cell::Cell::new(None),
             in_loop_cache: std::cell::RefCell::new(Vec::new()),
         }
     }

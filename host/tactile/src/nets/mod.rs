@@ -3,6 +3,7 @@
 //! `ocm-learn`, trained on pairs from the tactile FEM and the physically based renderer
 //! ([`pairs`]).
 
+pub mod force;
 pub mod pairs;
 pub mod real_frames;
 
@@ -450,6 +451,13 @@ pub struct PerceptionScores {
     /// Every scored sample.
     #[serde(default)]
     pub per_sample: Vec<PerceptionSample>,
+    /// Indentation above which a predicted pixel is in contact, m.
+    #[serde(default = "default_threshold")]
+    pub pred_threshold_m: f64,
+}
+
+fn default_threshold() -> f64 {
+    CONTACT_DZ_M
 }
 
 /// Rendering scores on held-out samples (against the physically based renderer's frames).
@@ -490,6 +498,14 @@ pub fn contact_mask(grid: Grid, dz_m: &[f32]) -> Mask {
     })
 }
 
+/// The contact mask of a `[rows, cols]` u_z field on `grid` at another threshold
+/// (indentation above `threshold_m`).
+pub fn contact_mask_at(grid: Grid, dz_m: &[f32], threshold_m: f64) -> Mask {
+    mask_from_fn(grid, |r, c| {
+        -f64::from(dz_m[r * grid.cols + c]) > threshold_m
+    })
+}
+
 /// Scores a perception network on samples `idx` of `pairs`.
 pub fn score_perception(
     net: &UNet,
@@ -501,7 +517,47 @@ pub fn score_perception(
     let t0 = std::time::Instant::now();
     let pred = data.predict(net, idx, 8, device);
     let ips = idx.len() as f64 / t0.elapsed().as_secs_f64();
+    let scores = score_predicted(&pred, pairs, idx, CONTACT_DZ_M, ips)?;
+    Ok((scores, pred))
+}
+
+/// Threshold on the predicted indentation (m) with the best median contact IoU over samples
+/// `idx` of `pairs`, among `candidates_m`; the true masks keep [`CONTACT_DZ_M`]. For choosing
+/// it on validation samples: the network's field is smooth at the rim, so where it crosses
+/// 30 um need not be where the FEM's does.
+pub fn fit_threshold(
+    pred: &[f32],
+    pairs: &Pairs,
+    idx: &[usize],
+    candidates_m: &[f64],
+) -> Result<(f64, f64)> {
+    let mut best = (CONTACT_DZ_M, f64::NEG_INFINITY);
+    for &t in candidates_m {
+        let s = score_predicted(pred, pairs, idx, t, f64::NAN)?;
+        if s.iou_median > best.1 {
+            best = (t, s.iou_median);
+        }
+    }
+    Ok(best)
+}
+
+/// Scores predicted u_z fields `pred` (`[rows, cols]` per sample of `idx`, m) against the FEM's
+/// on `pairs`, the predicted mask taken at `pred_threshold_m`; `ips` is reported as the speed.
+pub fn score_predicted(
+    pred: &[f32],
+    pairs: &Pairs,
+    idx: &[usize],
+    pred_threshold_m: f64,
+    ips: f64,
+) -> Result<PerceptionScores> {
     let n = pairs.pixels();
+    if pred.len() != idx.len() * n {
+        return Err(TactileError::Input(format!(
+            "{} predicted values for {} samples of {n} pixels",
+            pred.len(),
+            idx.len()
+        )));
+    }
     let grid = pairs.grid();
     let (mut ious, mut cens, mut rots, mut rots_el) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
@@ -518,7 +574,7 @@ pub fn score_perception(
         if mt.count() == 0 {
             continue;
         }
-        let mp = contact_mask(grid, p);
+        let mp = contact_mask_at(grid, p, pred_threshold_m);
         let iou = metrics::iou(&mt, &mp)?;
         ious.push(iou);
         let el = elongation(&mt);
@@ -550,21 +606,19 @@ pub fn score_perception(
     }
     let samples = ious.len();
     let mean = ious.iter().sum::<f64>() / samples.max(1) as f64;
-    Ok((
-        PerceptionScores {
-            samples,
-            iou_median: median(ious),
-            iou_mean: mean,
-            centroid_mm_median: median(cens),
-            rotation_rad_median: median(rots),
-            rotation_elongated_samples: rots_el.len(),
-            rotation_rad_median_elongated: median(rots_el),
-            dz_rmse_m: (se / count.max(1) as f64).sqrt(),
-            images_per_s: ips,
-            per_sample,
-        },
-        pred,
-    ))
+    Ok(PerceptionScores {
+        samples,
+        iou_median: median(ious),
+        iou_mean: mean,
+        centroid_mm_median: median(cens),
+        rotation_rad_median: median(rots),
+        rotation_elongated_samples: rots_el.len(),
+        rotation_rad_median_elongated: median(rots_el),
+        dz_rmse_m: (se / count.max(1) as f64).sqrt(),
+        images_per_s: ips,
+        per_sample,
+        pred_threshold_m,
+    })
 }
 
 /// Scores a rendering network on samples `idx` of `pairs`: its frames (background + predicted
@@ -689,5 +743,54 @@ mod tests {
         });
         assert!((elongation(&tall) - expect).abs() < 1e-9);
         assert_eq!(elongation(&mask_from_fn(grid(), |_, _| false)), 0.0);
+    }
+
+    /// A prediction that is the truth at 80 % depth: at 30 um its mask is too small, and the
+    /// threshold fitted on it is the one where the masks coincide (24 um), with IoU 1; a
+    /// mismatched prediction is refused.
+    #[test]
+    fn threshold_fit_finds_the_scaled_rim() {
+        let (rows, cols) = (20, 30);
+        let n = rows * cols;
+        let mut dz = vec![0.0f32; 2 * n];
+        for k in 0..2 {
+            for r in 0..rows {
+                for c in 0..cols {
+                    let d = ((r as f64 - 10.0).powi(2)
+                        + (c as f64 - 12.0 - 4.0 * k as f64).powi(2))
+                    .sqrt();
+                    dz[k * n + r * cols + c] = (-(200e-6 - 20e-6 * d).max(0.0)) as f32;
+                }
+            }
+        }
+        let pairs = Pairs {
+            rows,
+            cols,
+            pixel_m: 1e-4,
+            setup_names: vec!["cone".into()],
+            setup_unseen: vec![false],
+            setup: vec![0; 2],
+            depth_m: vec![2e-4; 2],
+            mirror: vec![0; 2],
+            state: vec![0, 1],
+            delta: vec![0.0; 6 * n],
+            dz_m: dz.clone(),
+            splat_dz_m: Vec::new(),
+            background: RgbImage {
+                rows,
+                cols,
+                data: vec![0; 3 * n],
+            },
+        };
+        let pred: Vec<f32> = dz.iter().map(|v| 0.8 * v).collect();
+        let idx = [0, 1];
+        let at30 = score_predicted(&pred, &pairs, &idx, CONTACT_DZ_M, 1.0).unwrap();
+        assert!(at30.iou_median < 0.95, "{}", at30.iou_median);
+        let cands: Vec<f64> = (0..=20).map(|k| 10e-6 + 2e-6 * k as f64).collect();
+        let (t, iou) = fit_threshold(&pred, &pairs, &idx, &cands).unwrap();
+        // 0.8 (200 - 20 d) um > t  <=>  200 - 20 d > t / 0.8: t = 24 um reproduces 30 um.
+        assert!((t - 24e-6).abs() < 1e-9, "{t}");
+        assert!((iou - 1.0).abs() < 1e-12);
+        assert!(score_predicted(&pred[..n], &pairs, &idx, t, 1.0).is_err());
     }
 }

@@ -84,14 +84,98 @@ pub fn uncolour(delta: &mut [f32], colour: &[[f64; 3]; 3]) -> Result<()> {
             *v = (m[a][c] * m[b][d] - m[a][d] * m[b][c]) / det;
         }
     }
+    recolour(delta, &inv);
+    Ok(())
+}
+
+/// Applies a 3 x 3 colour transform (rows: output R, G, B) to every pixel of a channel-major
+/// `[3, n]` delta image.
+pub fn recolour(delta: &mut [f32], m: &[[f64; 3]; 3]) {
     let n = delta.len() / 3;
     for p in 0..n {
         let d = [delta[p], delta[n + p], delta[2 * n + p]].map(f64::from);
-        for (ch, row) in inv.iter().enumerate() {
+        for (ch, row) in m.iter().enumerate() {
             delta[ch * n + p] = (row[0] * d[0] + row[1] * d[1] + row[2] * d[2]) as f32;
         }
     }
-    Ok(())
+}
+
+/// `frame` with each channel's median change against `bg` removed (the brightness drift
+/// between takes), rounded and clipped to 0..255.
+pub fn drift_removed(frame: &RgbImage, bg: &RgbImage) -> Result<RgbImage> {
+    let d = pairs::delta_of(frame, bg)?;
+    let n = frame.rows * frame.cols;
+    let mut data = frame.data.clone();
+    for ch in 0..3 {
+        let mut v = d[ch * n..(ch + 1) * n].to_vec();
+        v.sort_by(f32::total_cmp);
+        let m = v[n / 2];
+        for p in 0..n {
+            let x = f32::from(frame.data[p * 3 + ch]) - m;
+            data[p * 3 + ch] = (x.clamp(0.0, 255.0) + 0.5) as u8;
+        }
+    }
+    Ok(RgbImage {
+        rows: frame.rows,
+        cols: frame.cols,
+        data,
+    })
+}
+
+/// The colour transform that brings the real sensor's change into the rendered (calibrated)
+/// domain the network was trained in, fitted by least squares on the fitting frames `fit`:
+/// the FEM state paired with each real frame (`fields`, `fitted.offset_steps`) rendered by
+/// `renderer` (the optics the network's pairs were rendered with) through the fitted camera map,
+/// against the real frame, drift removed, over every pixel. It is the same fit as the optics'
+/// ([`real::fit_colour`]) with the roles of real and rendered exchanged: it minimises the error
+/// in the rendered domain, so a colour direction the real sensor barely shows is shrunk, not
+/// amplified as by inverting the forward transform ([`uncolour`]).
+pub fn fit_recolour(
+    gel: &crate::gel::Gel,
+    fields: &[Vec<[f64; 3]>],
+    frames: &[RgbImage],
+    fitted: &OpticsFile,
+    renderer: &crate::optics::Renderer,
+    fit: &[usize],
+) -> Result<[[f64; 3]; 3]> {
+    let bg = frames
+        .first()
+        .ok_or_else(|| TactileError::Input("no real frames".into()))?;
+    let sampler = crate::optics::SurfaceSampler::new(gel, bg.rows, bg.cols, &fitted.map);
+    let rendered = fit
+        .iter()
+        .map(|&k| real::render_paired(renderer, &sampler, fields, fitted.offset_steps, k))
+        .collect::<Result<Vec<_>>>()?;
+    let real_frames = fit
+        .iter()
+        .map(|&k| {
+            frames.get(k).ok_or_else(|| {
+                TactileError::Input(format!("fitting frame {k} of {} frames", frames.len()))
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    fit_recolour_images(&real_frames, &rendered, bg)
+}
+
+/// The least-squares transform of [`fit_recolour`] from paired real and rendered frames on the
+/// common background `bg` (the real frames' drift removed first).
+pub fn fit_recolour_images(
+    real_frames: &[&RgbImage],
+    rendered: &[RgbImage],
+    bg: &RgbImage,
+) -> Result<[[f64; 3]; 3]> {
+    if real_frames.len() != rendered.len() {
+        return Err(TactileError::Input(format!(
+            "{} real frames against {} rendered",
+            real_frames.len(),
+            rendered.len()
+        )));
+    }
+    let mut triples = Vec::with_capacity(rendered.len());
+    for (f, r) in real_frames.iter().zip(rendered) {
+        triples.push((drift_removed(f, bg)?, r, vec![0.0f32; bg.rows * bg.cols]));
+    }
+    Ok(real::fit_colour(&triples, bg).0)
 }
 
 /// The perception network on one real frame, against the mask measured on it.
@@ -124,6 +208,9 @@ pub struct RealOptions {
     /// Map the real change back into the calibrated colours ([`uncolour`]) before the network
     /// (for a network trained on frames rendered with the calibration as measured).
     pub uncolour: bool,
+    /// Map the real change into the rendered domain with this transform ([`fit_recolour`])
+    /// before the network (after the drift removal).
+    pub recolour: Option<[[f64; 3]; 3]>,
     /// Subtract from each channel of the real change its median over the pixels the camera
     /// sees (the frames drift by a few grey levels in brightness between takes; the rendered
     /// training frames never do, and the fitted depth shading reads a uniform darkening as a
@@ -139,6 +226,7 @@ impl Default for RealOptions {
     fn default() -> Self {
         RealOptions {
             uncolour: false,
+            recolour: None,
             remove_drift: true,
             mask: MaskOptions::default(),
             step_m: 10e-6,
@@ -205,6 +293,9 @@ pub fn perceive_real(
         }
         if opts.uncolour {
             uncolour(&mut d, &fitted.colour)?;
+        }
+        if let Some(m) = &opts.recolour {
+            recolour(&mut d, m);
         }
         delta.extend(d);
     }
@@ -345,5 +436,65 @@ mod tests {
         }
         let singular = [[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 1.0, 1.0]];
         assert!(uncolour(&mut d, &singular).is_err());
+    }
+
+    /// Real frames made from rendered ones by a known colour transform plus a brightness
+    /// drift: the fit recovers the transform's inverse (the drift removed), and applying it
+    /// brings the real change back to the rendered one.
+    #[test]
+    fn recolour_fit_recovers_the_inverse_transform() {
+        let (rows, cols) = (20, 30);
+        let bg = RgbImage {
+            rows,
+            cols,
+            data: (0..rows * cols * 3).map(|i| 100 + (i % 7) as u8).collect(),
+        };
+        let c = [[0.5, -0.1, 0.2], [0.1, 0.7, 0.0], [-0.2, 0.1, 0.6]];
+        let mut rendered = Vec::new();
+        let mut real_frames = Vec::new();
+        for f in 0..3usize {
+            let mut r = bg.clone();
+            let mut q = bg.clone();
+            for p in 0..rows * cols {
+                // A patch of changes over a third of the frame (the rest stays background,
+                // so the median change, the drift, is exactly the added offset).
+                if (p + 5 * f) % 3 != 0 {
+                    continue;
+                }
+                let d = [
+                    ((p * 7 + f * 3) % 41) as f64 - 20.0,
+                    ((p * 11 + f) % 37) as f64 - 18.0,
+                    ((p * 5 + 2 * f) % 29) as f64 - 14.0,
+                ];
+                for ch in 0..3 {
+                    r.data[p * 3 + ch] = (f64::from(bg.data[p * 3 + ch]) + d[ch]) as u8;
+                    let out: f64 = (0..3).map(|j| c[ch][j] * d[j]).sum();
+                    q.data[p * 3 + ch] = (f64::from(bg.data[p * 3 + ch]) + out).round() as u8;
+                }
+            }
+            for (ch, v) in q.data.iter_mut().enumerate() {
+                *v += [3u8, 1, 2][ch % 3];
+            }
+            rendered.push(r);
+            real_frames.push(q);
+        }
+        let refs: Vec<&RgbImage> = real_frames.iter().collect();
+        let m = fit_recolour_images(&refs, &rendered, &bg).unwrap();
+        let mut d = vec![0.0f32; 3];
+        for j in 0..3 {
+            // m C = I up to the rounding of the real frames.
+            for i in 0..3 {
+                let e: f64 = (0..3).map(|k| m[i][k] * c[k][j]).sum();
+                let want = if i == j { 1.0 } else { 0.0 };
+                assert!((e - want).abs() < 0.03, "m = {m:?}: (m C)[{i}][{j}] = {e}");
+            }
+            d[j] = 10.0;
+        }
+        assert!(fit_recolour_images(&refs[..1], &rendered, &bg).is_err());
+        recolour(
+            &mut d,
+            &[[0.0, 1.0, 0.0], [2.0, 0.0, 0.0], [0.0, 0.0, -1.0]],
+        );
+        assert_eq!(d, vec![10.0, 20.0, -10.0]);
     }
 }
