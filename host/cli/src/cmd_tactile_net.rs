@@ -487,7 +487,7 @@ fn perceive_real(
             .map(f)
             .filter(|x| !x.is_nan())
             .collect();
-        median(v)
+        ocm_mor::run::median(&v)
     };
     let summary = |odd: bool| {
         serde_json::json!({
@@ -544,19 +544,6 @@ fn perceive_real(
         );
     }
     Ok(())
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 fn rayon_threads() -> usize {

@@ -40,11 +40,6 @@ pub struct BenchReport {
     pub policy_hz: f64,
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(|a, b| a.total_cmp(b));
-    v[v.len() / 2]
-}
-
 /// Runs the benchmark with random actions (seeded) and `policy` for the inference rate.
 pub fn run(
     robot: &Arc<Robot>,
@@ -92,9 +87,9 @@ pub fn run(
         hz.push(cfg.inferences.max(1) as f64 / t.elapsed().as_secs_f64());
     }
     Ok(BenchReport {
-        single_steps_per_s: median(single),
-        vector_steps_per_s: median(vector),
+        single_steps_per_s: ocm_mor::run::median(&single),
+        vector_steps_per_s: ocm_mor::run::median(&vector),
         substeps: env_cfg.substeps,
-        policy_hz: median(hz),
+        policy_hz: ocm_mor::run::median(&hz),
     })
 }

@@ -24,16 +24,6 @@ fn cpu_seconds() -> f64 {
     (tick(11) + tick(12)) / 100.0
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
-
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let name = args.first().map_or("edge6", String::as_str);
@@ -73,9 +63,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "{name} on {mesh} ({} nodes), {steps} steps of {step_um} um: median wall {:.3} s/step, \
          median cpu {:.2} s/step (10 ms ticks), median {} Newton iterations/step, total wall {:.1} s",
         gel.num_nodes(),
-        median(wall.clone()),
-        median(cpu),
-        median(iters),
+        ocm_mor::run::median(&wall),
+        ocm_mor::run::median(&cpu),
+        ocm_mor::run::median(&iters),
         wall.iter().sum::<f64>()
     );
     Ok(())
