@@ -58,6 +58,19 @@ pub enum NpeCommand {
         /// neighbours, vertical displacement as a correction to minus the penetration.
         #[arg(long)]
         contact_prior: bool,
+        /// A contact head beside the readout: a per-node classifier of the FEM's contact state
+        /// (-u_z > 30 um), trained with a cross-entropy; `eval` then reads the contact nodes
+        /// from it.
+        #[arg(long)]
+        contact_head: bool,
+        /// Weight of the contact head's cross-entropy.
+        #[arg(long, default_value_t = 1.0)]
+        lambda_contact: f64,
+        /// Fine-tune this checkpoint of `ocm npe train` (same split: same --seed, --test-setups,
+        /// --val-setups and dataset) instead of starting from random weights; its architecture
+        /// is kept, the loss weights and the contact head are these options'.
+        #[arg(long)]
+        init_from: Option<PathBuf>,
         /// Leave the contact points out (the ablation without geometry).
         #[arg(long)]
         no_geometry: bool,
@@ -213,6 +226,9 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             val_setups,
             lambda_total,
             contact_prior,
+            contact_head,
+            lambda_contact,
+            init_from,
             no_geometry,
             no_force,
             json,
@@ -233,6 +249,9 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
                 layers,
                 lambda_total,
                 contact_prior,
+                contact_head,
+                lambda_contact,
+                init_from,
                 test_setups,
                 val_setups,
                 progress: !json,
@@ -243,6 +262,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             let meta = serde_json::json!({
                 "split": r.split,
                 "options": opts,
+                "config": r.npe.config,
                 "dataset": dataset.display().to_string(),
                 "train_samples": r.train_samples,
                 "best_epoch": r.best_epoch,

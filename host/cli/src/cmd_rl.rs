@@ -131,6 +131,20 @@ pub enum RlCommand {
         /// PPO with --residual-on: largest correction per action value, action units.
         #[arg(long, default_value_t = 0.1)]
         residual_scale: f64,
+        /// PPO: factors on the exploration std per action value (theta_x, theta_y, d); e.g.
+        /// `0.3 0.3 0.5` for force control and `1 1 0.3` for the ellipse from scratch (one
+        /// action unit moves the TCP about 84 mm sideways and 30 mm along z).
+        #[arg(long, num_args = 3, value_names = ["THETA_X", "THETA_Y", "D"])]
+        std_scale: Option<Vec<f64>>,
+        /// Plate tasks: stiffness of the approach term of the force reward, N/m (0: eq 4.30
+        /// as printed; out of contact the force reward falls with the gap to the surface).
+        #[arg(long, default_value_t = 0.0)]
+        approach_n_per_m: f64,
+        /// Training episodes end (terminated) when the TCP is farther than this from its
+        /// target, mm; the final evaluation keeps the default 50 mm. Raise it with the
+        /// approach term, whose rewards can be negative (ending early would pay).
+        #[arg(long, default_value_t = 50.0)]
+        lost_distance_mm: f64,
         /// Per-episode plant perturbations during training and the final evaluation.
         #[command(flatten)]
         random: RandomArgs,
@@ -559,6 +573,9 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
             bc_weight,
             residual_on,
             residual_scale,
+            std_scale,
+            approach_n_per_m,
+            lost_distance_mm,
             random,
             out,
             json,
@@ -582,6 +599,15 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                 }
             };
             let cfg = random.config(kind);
+            let train_cfg = EnvConfig {
+                approach_n_per_m,
+                lost_distance_m: lost_distance_mm * 1e-3,
+                ..cfg
+            };
+            let std_scale: [f64; 3] = match &std_scale {
+                Some(v) => [v[0], v[1], v[2]],
+                None => PpoConfig::default().std_scale,
+            };
             mkdir(&out)?;
             let t0 = std::time::Instant::now();
             let (policy, name) = match algo {
@@ -622,6 +648,7 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                         bc_weight,
                         residual_on: residual_on.clone(),
                         residual_scale,
+                        std_scale,
                         eval_episodes: select_episodes,
                         learning_rate: learning_rate.unwrap_or(PpoConfig::default().learning_rate),
                         ..PpoConfig::default()
@@ -636,7 +663,7 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                     } else {
                         "ppo"
                     };
-                    let (policy, curve) = ppo::train(&robot, &cfg, &p_cfg, |r| {
+                    let (policy, curve) = ppo::train(&robot, &train_cfg, &p_cfg, |r| {
                         b.inc(1);
                         if r.eval_return.is_finite() {
                             b.set_message(format!(
@@ -668,7 +695,7 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                     } else {
                         bar(steps, "SAC")
                     };
-                    let (policy, curve) = sac::train(&robot, &cfg, &s_cfg, |r| {
+                    let (policy, curve) = sac::train(&robot, &train_cfg, &s_cfg, |r| {
                         b.set_position(r.iteration as u64);
                         b.set_message(format!(
                             "SAC eval {:.2} mm / {:.2} N",
@@ -709,6 +736,9 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
                 "residual_on": residual_on,
                 "residual_scale": residual_on.as_ref().map(|_| residual_scale),
                 "randomisation": random.json(),
+                "approach_n_per_m": approach_n_per_m,
+                "lost_distance_mm": lost_distance_mm,
+                "std_scale": matches!(algo, Algorithm::Ppo).then_some(std_scale),
                 "eval": summary(&report),
                 "base_eval": base_report.as_ref().map(summary),
                 "policy": out.join("policy.ckpt"),

@@ -206,6 +206,10 @@ pub enum TactileCommand {
         /// Threads of the reduced model's signed-distance queries.
         #[arg(long, default_value_t = 2)]
         threads: usize,
+        /// With --model reduced: grow the basis of each set-up by its two footprint modes (the
+        /// rest stiffness' responses to normal loads on the indenter's footprint and its rim).
+        #[arg(long)]
+        enrich: bool,
         /// FEM cache: one folder per set-up of u_NNN.npy / f_NNN.npy.
         #[arg(long, default_value = "out/npe/fem")]
         cache: PathBuf,
@@ -429,6 +433,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             model,
             rom,
             threads,
+            enrich,
             cache,
             out,
             json,
@@ -493,9 +498,19 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                     let rm = ocm_tactile::reduced::ReducedModel::load(&rom)?;
                     let ro =
                         ocm_tactile::reduced::ReducedOptions::for_modulus(gel.material.young_pa);
+                    let rest = if enrich {
+                        Some(ocm_tactile::reduced::RestStiffness::new(&gel)?)
+                    } else {
+                        None
+                    };
+                    let loads = ocm_tactile::reduced::DEFAULT_FOOTPRINT_LOADS;
+                    let e = rest.as_ref().map(|rest| ocm_tactile::reduced::Enrichment {
+                        rest,
+                        loads: &loads,
+                    });
                     rayon_pool(threads)?.install(|| {
                         ocm_tactile::dataset::build_reduced(
-                            &gel, mesh_file, &chosen, &opts, &rm, &rom, ro, &out, tick,
+                            &gel, mesh_file, &chosen, &opts, &rm, &rom, ro, e, &out, tick,
                         )
                     })?
                 }
@@ -1085,6 +1100,10 @@ pub struct ReduceArgs {
     /// load on the indenter's footprint and on its rim), built inside each timed run.
     #[arg(long)]
     enrich: bool,
+    /// With --enrich: the footprint loads whose responses become modes, comma-separated, out of
+    /// foot, rim, ring2, out, out_rim, radial, tilt_x, tilt_y, skirt.
+    #[arg(long, value_delimiter = ',', default_value = "foot,rim")]
+    enrich_loads: Vec<String>,
     /// Timed repeats of each held-out sequence.
     #[arg(long, default_value_t = 5)]
     repeats: usize,
@@ -1216,11 +1235,17 @@ fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
                 FemSequence::read(dir, gel.num_nodes(), Some(a.step_um * 1e-6))?,
             ));
         }
+        let loads: Vec<&str> = a.enrich_loads.iter().map(|s| s.as_str()).collect();
+        ocm_tactile::reduced::check_footprint_loads(&loads)?;
         let rest = if a.enrich {
             Some(ocm_tactile::reduced::RestStiffness::new(&gel)?)
         } else {
             None
         };
+        let enrich = rest.as_ref().map(|rest| ocm_tactile::reduced::Enrichment {
+            rest,
+            loads: &loads,
+        });
         let mut per_rank = Vec::new();
         for &r in &ranks {
             let m = model.truncated(r)?;
@@ -1229,9 +1254,9 @@ fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
             opts.max_updates = a.updates;
             let mut scores = Vec::new();
             for (setup, seq) in &seqs {
-                scores.push(pool.install(|| {
-                    score_sequence(&m, &gel, setup, seq, opts, a.repeats, rest.as_ref())
-                })?);
+                scores.push(
+                    pool.install(|| score_sequence(&m, &gel, setup, seq, opts, a.repeats, enrich))?,
+                );
             }
             // Frames per second of each repeat over all sequences together; the median repeat.
             let frames: usize = scores.iter().map(|s| s.frames).sum();
@@ -1249,6 +1274,7 @@ fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
             let entry = serde_json::json!({
                 "rank": r,
                 "enriched": a.enrich,
+                "enrich_loads": if a.enrich { loads.clone() } else { Vec::new() },
                 "frames": frames,
                 "frames_per_s_median": median(&fps),
                 "frames_per_s": fps,

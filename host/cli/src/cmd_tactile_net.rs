@@ -59,6 +59,11 @@ pub struct TrainNetArgs {
     /// beside eq 5.15's MSE on dz; 0 trains on eq 5.15 alone.
     #[arg(long, default_value_t = 0.02)]
     pub mask_loss: f32,
+    /// Perception: weight of the soft contact IoU term (1 - soft IoU of the sigmoid of the same
+    /// logit, per sample, averaged over samples): weighs small and shallow contacts like large
+    /// ones; 0 leaves it out.
+    #[arg(long, default_value_t = 0.0)]
+    pub iou_loss: f32,
     /// Also train on the seen states with the surface mirrored across the image rows, columns
     /// and both, each rendered anew (4 x the training samples; validation and held-out
     /// samples stay unmirrored).
@@ -89,6 +94,17 @@ pub struct TrainNetArgs {
     /// from the FEM's own u_z, on the image grid and on the nodes).
     #[arg(long, requires = "force")]
     pub force_fast: bool,
+    /// With --force: indentation above which a top node is in the prescribed contact patch, um
+    /// (the contact masks' 30 um by default).
+    #[arg(long, requires = "force", default_value_t = 30.0)]
+    pub force_threshold_um: f64,
+    /// With --force: hold the patch's x and y (a contact stuck where it was touched) instead of
+    /// leaving them free (frictionless).
+    #[arg(long, requires = "force")]
+    pub force_stuck: bool,
+    /// With --force: score every K-th held-out sample only (the solves take seconds each).
+    #[arg(long, requires = "force", default_value_t = 1)]
+    pub force_every: usize,
     /// With --score-only on a perception checkpoint: choose the indentation threshold of the
     /// predicted contact mask (10 to 100 um in 2.5 um steps) by the median IoU on the
     /// validation samples, and score the held-out ones at it (the true masks stay at 30 um).
@@ -168,6 +184,7 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
     };
     let mut data = NetData::new(kind, &pairs);
     data.mask_loss_weight = a.mask_loss;
+    data.iou_loss_weight = a.iou_loss;
     let seen = pairs.samples_where_unseen(false);
     let held = pairs.samples_where_unseen(true);
     anyhow::ensure!(
@@ -229,6 +246,7 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
     let meta = serde_json::json!({
         "seed": a.seed,
         "mask_loss": a.mask_loss,
+        "iou_loss": a.iou_loss,
         "mirror": a.mirror,
         "init_from": a.init_from.as_ref().map(|p| p.display().to_string()),
         "optics": a.optics.as_ref().map(|p| p.display().to_string()),
@@ -301,6 +319,7 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
         "image": [pairs.rows, pairs.cols],
         "scale": a.scale,
         "mask_loss": a.mask_loss,
+        "iou_loss": a.iou_loss,
         "mirror": a.mirror,
         "init_from": a.init_from.as_ref().map(|p| p.display().to_string()),
         "optics": a.optics.as_ref().map(|p| p.display().to_string()),
@@ -389,7 +408,24 @@ fn score_only(
                 let top = TopSurface::from_gel(gel);
                 let to_mesh = GridToMesh::new(&top.rest_m, pairs.rows, pairs.cols, &map)?;
                 let model = SurfaceForceModel::new(gel)?;
-                let f = score_force(&model, &to_mesh, pairs, ds, &pred, held, !a.force_fast)?;
+                anyhow::ensure!(a.force_every >= 1, "--force-every must be at least 1");
+                let n = pairs.pixels();
+                let (mut sub, mut sub_pred) = (Vec::new(), Vec::new());
+                for (k, &i) in held.iter().enumerate().step_by(a.force_every) {
+                    sub.push(i);
+                    sub_pred.extend_from_slice(&pred[k * n..(k + 1) * n]);
+                }
+                let f = score_force(
+                    &model,
+                    &to_mesh,
+                    pairs,
+                    ds,
+                    &sub_pred,
+                    &sub,
+                    !a.force_fast,
+                    a.force_threshold_um * 1e-6,
+                    a.force_stuck,
+                )?;
                 std::fs::create_dir_all(&a.out)
                     .with_context(|| format!("creating {}", a.out.display()))?;
                 std::fs::write(

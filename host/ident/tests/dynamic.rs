@@ -1,10 +1,32 @@
 //! Hidden effects inside the dynamics of oscillators, identified on the linear state-space
 //! baseline (free-run predictions). `OCM_DYN_SEEDS` sets the seeds per case (default 3),
-//! `OCM_DYN_SEED0` the first seed (default 1000).
+//! `OCM_DYN_SEED0` the first seed (default 1000), `OCM_DYN_SYSTEMS` the systems (a
+//! comma-separated subset of `oscillator1,oscillator2,chamber`, default all three).
 
 use ocm_ident::baseline::SeriesModel;
 use ocm_ident::dynamic_generator::{DynSpec, EFFECTS, System, generate};
 use ocm_ident::{Cause, Config, identify};
+
+/// The systems of the battery: `OCM_DYN_SYSTEMS` or all.
+fn systems() -> Vec<System> {
+    let all = [
+        ("oscillator1", System::Oscillator1),
+        ("oscillator2", System::Oscillator2),
+        ("chamber", System::Chamber),
+    ];
+    match std::env::var("OCM_DYN_SYSTEMS") {
+        Ok(list) => list
+            .split(',')
+            .map(|name| {
+                all.iter()
+                    .find(|(n, _)| *n == name.trim())
+                    .unwrap_or_else(|| panic!("OCM_DYN_SYSTEMS: unknown system {name:?}"))
+                    .1
+            })
+            .collect(),
+        Err(_) => all.iter().map(|(_, s)| *s).collect(),
+    }
+}
 
 #[test]
 fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
@@ -21,7 +43,7 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
         series_model: SeriesModel::StateSpace,
         ..Config::default()
     };
-    let cases: Vec<(System, Cause, u64)> = [System::Oscillator1, System::Oscillator2]
+    let cases: Vec<(System, Cause, u64)> = systems()
         .into_iter()
         .flat_map(|system| {
             std::iter::once(Cause::None)
@@ -81,9 +103,10 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
         }
     }
     eprintln!("dynamic battery: {correct} / {total} correct, {false_alarms} false alarms");
-    // regression bounds of the measured figures (10 seeds from 1000: 56 of 60, from 2000: 53
-    // of 60, from 3000: 59 of 60, no false alarm on 60 clean records); the 95 % is
-    // reached on one range of three, see the README
+    // regression bounds of the measured figures (with the chamber, 3 seeds: 24 of 27, no false
+    // alarm on 9 clean records; the oscillators on 10 seeds before this round's selection
+    // fixes: 56, 53 and 59 of 60 from seeds 1000, 2000, 3000); the 95 % is not
+    // reached, see the README
     assert!(total > 0);
     assert_eq!(false_alarms, 0, "{false_alarms} false alarms");
     assert!(correct * 100 >= 80 * total, "{correct} / {total}");
@@ -106,7 +129,7 @@ fn dynamic_pairs_name_both_effects() {
         series_model: SeriesModel::StateSpace,
         ..Config::default()
     };
-    let cases: Vec<(System, [Cause; 2], u64)> = [System::Oscillator1, System::Oscillator2]
+    let cases: Vec<(System, [Cause; 2], u64)> = systems()
         .into_iter()
         .flat_map(|system| {
             PAIRS
@@ -150,6 +173,27 @@ fn dynamic_pairs_name_both_effects() {
                                 id.report.gain_pct,
                                 g.details
                             );
+                            // the evidence per candidate, to see why a pair is missed:
+                            // cause gain/score/accepted, singles then additions
+                            let show = |cs: &[ocm_ident::select::Candidate]| {
+                                cs.iter()
+                                    .map(|c| {
+                                        format!(
+                                            "{} {:.1}%/{:.0}{}",
+                                            c.cause,
+                                            c.gain_pct,
+                                            c.score,
+                                            if c.accepted { "+" } else { "" }
+                                        )
+                                    })
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            };
+                            eprintln!(
+                                "  singles: {}\n  additions: {}",
+                                show(&id.report.candidates),
+                                show(&id.report.additions)
+                            );
                             (counts, exact, one)
                         })
                         .collect::<Vec<_>>()
@@ -181,7 +225,8 @@ const PAIRS: [[Cause; 2]; 3] = [
     [Cause::Hysteresis, Cause::Friction],
 ];
 
-/// Regression floor of the exact-pair share, percent: measured 2 of 6 with one seed (seed
-/// 5000) and 6 of 12 with two (`OCM_DYN_PAIR_SEEDS=2`: one mass 5 of 6, two masses 1 of 6);
-/// the 80 % is not reached, see the README.
-const PAIR_FLOOR_PCT: usize = 33;
+/// Regression floor of the exact-pair share, percent: measured 4 of 9 with one seed (seed
+/// 5000; one mass 2 of 3, two masses 2 of 3, chamber 0 of 3); before the bound-constrained
+/// in-loop steps and the held-out guard on swaps, 2 of 6 on the oscillators. The 80 %
+/// is not reached, see the README.
+const PAIR_FLOOR_PCT: usize = 44;

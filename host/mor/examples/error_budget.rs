@@ -21,7 +21,10 @@
 //! replaces Galerkin by Petrov-Galerkin with the test basis J0^-1 V
 //! (`ocm_mor::modes::step_test_basis`, `ReducedModel::petrov_galerkin`); MOR_STEPRESP=m appends
 //! the first m POD modes of the full model's step responses to unit chamber pressures at
-//! training states.
+//! training states. MOR_LSPG runs least-squares Petrov-Galerkin (`ocm_mor::lspg`, Gauss-Newton on
+//! the full step residual, no hyper-reduction) instead of the Galerkin models (MOR_LSPG_GTOL: its
+//! stationarity tolerance; MOR_LSPG_FD: Jacobian by differences; MOR_LSPG_J0: residual weighted by the
+//! inverse step matrix at rest; MOR_LSPG_CHECK: the assembled Jacobian against differences) and times the full step on the first held-out sequence.
 use nalgebra::{DMatrix, DVector};
 use ocm_fem::bellows::{Bellows, BellowsConfig};
 use ocm_mor::curve::projected_tcp_rmse_mm;
@@ -521,6 +524,117 @@ fn main() -> ocm_mor::Result<()> {
                     (&qg - &qp).norm() / qp.norm()
                 );
             }
+        }
+        // MOR_LSPG: least-squares Petrov-Galerkin (Gauss-Newton on the full step residual with
+        // the current Jacobian, no hyper-reduction) instead of the Galerkin models; also times
+        // the full step on the first held-out sequence in this process.
+        if std::env::var("MOR_LSPG").is_ok() {
+            let mut lspg = ocm_mor::lspg::Lspg::new(&b.model, v.clone(), &b.top_face)?;
+            lspg.options.finite_difference_jacobian = std::env::var("MOR_LSPG_FD").is_ok();
+            if std::env::var("MOR_LSPG_J0").is_ok() {
+                lspg.weight_by_rest_step_matrix(h)?;
+            }
+            if let Some(g) = std::env::var("MOR_LSPG_GTOL")
+                .ok()
+                .and_then(|v| v.parse().ok())
+            {
+                lspg.options.gtol = g;
+            }
+            // MOR_LSPG_CHECK: the assembled Jacobian (through the rigid fit V_s) against
+            // differences of the residual, after 20 steps of the first held-out sequence.
+            if std::env::var("MOR_LSPG_CHECK").is_ok()
+                && let Some((_, inputs, _)) = held.first()
+            {
+                let fd = lspg.options.finite_difference_jacobian;
+                lspg.options.finite_difference_jacobian = true;
+                let mut st = lspg.rest_state();
+                for inp in &inputs[..20] {
+                    lspg.step(&mut st, inp, h)?;
+                }
+                let next = st.q.clone() + &st.v * h;
+                let (res, jd) = lspg.residual(&st, &inputs[20], h, &next)?;
+                lspg.options.finite_difference_jacobian = false;
+                let (_, ja) = lspg.residual(&st, &inputs[20], h, &next)?;
+                lspg.options.finite_difference_jacobian = fd;
+                let nb = lspg.rows() - 6;
+                let part = |m: &DMatrix<f64>, body: bool| {
+                    if body {
+                        m.rows(nb, 6).norm()
+                    } else {
+                        m.rows(0, nb).norm()
+                    }
+                };
+                let d = &ja - &jd;
+                eprintln!(
+                    "  lspg Jacobian check rank {r}: |R| {:.3e}; differences |J| free rows {:.3e}, body rows {:.3e}; assembled - differences: free {:.3e}, body {:.3e}; descent cosine of the assembled GN step {:.3e}",
+                    res.norm(),
+                    part(&jd, false),
+                    part(&jd, true),
+                    part(&d, false),
+                    part(&d, true),
+                    {
+                        let g = ja.tr_mul(&res);
+                        let dq = (ja.tr_mul(&ja))
+                            .lu()
+                            .solve(&(-&g))
+                            .unwrap_or_else(|| g.clone());
+                        let gt = jd.tr_mul(&res);
+                        gt.dot(&dq) / (gt.norm() * dq.norm())
+                    }
+                );
+            }
+            let (mut sq, mut cnt, mut times, mut its) = (0.0, 0usize, vec![], 0usize);
+            let mut bands = [(0.0, 0usize); 3];
+            for (k, inputs, xs_full) in &held {
+                let run = match lspg.simulate(&rp, &expand(inputs), h) {
+                    Ok(run) => run,
+                    Err(e) => {
+                        eprintln!("  lspg rank {r}, held-out sequence {k}: {e}");
+                        continue;
+                    }
+                };
+                let run_xs: Vec<_> = run.xs.into_iter().skip(sub - 1).step_by(sub).collect();
+                for (x, y) in run_xs.iter().zip(xs_full) {
+                    let e2 = (0..3).map(|d| (x[d] - y[d]).powi(2)).sum::<f64>();
+                    let speed = (8..11).map(|d| y[d].powi(2)).sum::<f64>().sqrt() * 1e3;
+                    let band = [30.0, 300.0].iter().position(|&b| speed < b).unwrap_or(2);
+                    bands[band].0 += e2;
+                    bands[band].1 += 1;
+                }
+                let e = tcp_rmse_mm(&run_xs, xs_full)?;
+                eprintln!("  lspg rank {r}, held-out sequence {k}: TCP RMSE {e:.4} mm");
+                sq += e * e * run_xs.len() as f64;
+                cnt += run_xs.len();
+                times.extend(run.step_seconds);
+                its += run.report.iterations;
+            }
+            let full_ms = match held.first() {
+                Some((_, inputs, _)) => {
+                    median(
+                        &ocm_mor::full::simulate(&b, inputs, drive.dt_s, false, |_| {})?
+                            .step_seconds,
+                    ) * 1e3
+                }
+                None => f64::NAN,
+            };
+            println!(
+                "{r},lspg,0,{},{:.4},{:.4},{:.3}",
+                b.model.elements.len(),
+                (sq / cnt.max(1) as f64).sqrt(),
+                median(&times) * 1e3,
+                its as f64 / cnt.max(1) as f64
+            );
+            let band = |i: usize| (bands[i].0 / bands[i].1.max(1) as f64).sqrt() * 1e3;
+            eprintln!(
+                "  lspg: full step median {full_ms:.3} ms; TCP RMSE by full TCP speed: < 30 mm/s {:.3} mm ({}), 30-300 {:.3} mm ({}), > 300 {:.3} mm ({})",
+                band(0),
+                bands[0].1,
+                band(1),
+                bands[1].1,
+                band(2),
+                bands[2].1
+            );
+            continue;
         }
         let tq = s.training_q(&v, every);
         let mut models = vec![];

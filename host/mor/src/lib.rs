@@ -5,9 +5,10 @@
 //! -> [`pod`] (randomized SVD basis) -> [`rom`] (Galerkin projection, ECSW hyper-reduction via
 //! [`nnls`], reduced statics and implicit dynamics) -> [`xs`] (X_S of a full or reduced state) ->
 //! [`dataset`] (NPY + JSON manifest, shards). [`store`] keeps bases and reduced models on disk with
-//! their hashes. [`weighted`] is the stiffness-weighted POD and [`modes`] the full model's rest
-//! modes, static load shapes and Petrov-Galerkin test bases (all measured, none better for the
-//! bellows: see the README's error budget).
+//! their hashes. [`weighted`] is the stiffness-weighted POD, [`modes`] the full model's rest
+//! modes, static load shapes and Petrov-Galerkin test bases, and [`lspg`] least-squares
+//! Petrov-Galerkin steps on the full step residual (all measured, none better for the bellows:
+//! see the README's error budget).
 
 #![allow(clippy::needless_range_loop)]
 
@@ -16,6 +17,7 @@ pub mod dataset;
 pub mod drive;
 pub mod error;
 pub mod full;
+pub mod lspg;
 pub mod modes;
 pub mod nnls;
 pub mod pod;

@@ -217,12 +217,17 @@ pub struct ReducedProbe {
 impl ReducedProbe {
     /// Gathers the rows of `rom`'s basis that X_S reads.
     pub fn new(probe: XsProbe, rom: &ReducedModel) -> Self {
+        Self::of_basis(probe, &rom.basis)
+    }
+
+    /// Gathers the rows of `basis` (3N x r) that X_S reads.
+    pub fn of_basis(probe: XsProbe, basis: &DMatrix<f64>) -> Self {
         let nodes = probe.nodes();
-        let r = rom.rank();
+        let r = basis.ncols();
         let mut rows = DMatrix::zeros(3 * nodes.len(), r);
         for (k, &i) in nodes.iter().enumerate() {
             for d in 0..3 {
-                rows.row_mut(3 * k + d).copy_from(&rom.basis.row(3 * i + d));
+                rows.row_mut(3 * k + d).copy_from(&basis.row(3 * i + d));
             }
         }
         ReducedProbe {

@@ -18,8 +18,9 @@ pub struct Latency {
     pub p10_p90_ms: [f64; 2],
 }
 
-/// Times `calls` calls of [`Npe::predict`] on the same input after `warmup` untimed ones,
-/// with the CPU backend limited to `threads` worker threads.
+/// Times `calls` calls of [`Npe::predict`] (of [`Npe::predict_contact`] for an engine with a
+/// contact head, which then belongs to the call) on the same input after `warmup` untimed
+/// ones, with the CPU backend limited to `threads` worker threads.
 pub fn latency(
     npe: &Npe,
     points_m: &[[f64; 3]],
@@ -44,13 +45,20 @@ fn timed(
     warmup: usize,
     calls: usize,
 ) -> Result<Latency> {
+    let call = || -> Result<_> {
+        if npe.has_contact_head() {
+            Ok(std::hint::black_box(npe.predict_contact(points_m, force_n, depth_m)?).0)
+        } else {
+            npe.predict(points_m, force_n, depth_m)
+        }
+    };
     for _ in 0..warmup {
-        npe.predict(points_m, force_n, depth_m)?;
+        call()?;
     }
     let mut t = Vec::with_capacity(calls);
     for _ in 0..calls.max(1) {
         let t0 = std::time::Instant::now();
-        let f = npe.predict(points_m, force_n, depth_m)?;
+        let f = call()?;
         t.push(t0.elapsed().as_secs_f64() * 1e3);
         std::hint::black_box(f);
     }

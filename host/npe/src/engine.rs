@@ -47,6 +47,21 @@ impl Fields {
     }
 }
 
+/// The contact head's logit per node (None for an engine without a head).
+pub type ContactLogits = Option<Vec<f32>>;
+
+/// The contact state of every node: `logits` above 0 when given (the contact head), else the
+/// downward displacement above the contact-node metric's 30 um.
+pub fn contact_state(displacement_m: &[[f64; 3]], logits: Option<&[f32]>) -> Vec<bool> {
+    match logits {
+        Some(z) => z.iter().map(|&v| v > 0.0).collect(),
+        None => displacement_m
+            .iter()
+            .map(|u| -u[2] > ocm_tactile::mask::CONTACT_THRESHOLD_M)
+            .collect(),
+    }
+}
+
 /// How far below the top face a contact point may lie, m: deeper points would cut through
 /// most of the DIGIT gel (about 4 mm thick over its fixed base), which the training data never
 /// shows.
@@ -230,6 +245,54 @@ impl Npe {
         let mut fields = self.unscale(&out);
         fields.ignored_points = ignored;
         Ok(fields)
+    }
+
+    /// [`Npe::predict`] and the contact state of every top node: the contact head's logit
+    /// above 0 when the engine has one, else -u_z above 30 um (the threshold of the
+    /// contact-node metric). No point presses on the face: no node in contact.
+    pub fn predict_contact(
+        &self,
+        points_m: &[[f64; 3]],
+        force_n: f64,
+        depth_m: f64,
+    ) -> Result<(Fields, Vec<bool>)> {
+        let x = self.admit(points_m, force_n, depth_m)?;
+        let ignored = points_m.len() - x.counts[0];
+        let n = self.surface.rest_m.len();
+        if x.counts[0] == 0 {
+            let fields = Fields {
+                displacement_m: vec![[0.0; 3]; n],
+                nodal_force_n: vec![[0.0; 3]; n],
+                ignored_points: ignored,
+            };
+            return Ok((fields, vec![false; n]));
+        }
+        let (out, logits, _) = self.kernel.forward_full(&x);
+        let mut fields = self.unscale(&out);
+        fields.ignored_points = ignored;
+        let contact = contact_state(&fields.displacement_m, logits.as_deref());
+        Ok((fields, contact))
+    }
+
+    /// Whether the engine carries a contact head.
+    pub fn has_contact_head(&self) -> bool {
+        self.net.contact.is_some()
+    }
+
+    /// The contact head's logits from the plain kernel (first) and from burn (second) on one
+    /// call; for comparisons.
+    pub fn contact_logits_both(
+        &self,
+        points_m: &[[f64; 3]],
+        force_n: f64,
+        depth_m: f64,
+    ) -> Result<(ContactLogits, ContactLogits)> {
+        let x = self.admit(points_m, force_n, depth_m)?;
+        let (_, plain, _) = self.kernel.forward_full(&x);
+        let (_, burn, _) =
+            self.net
+                .forward_full(&self.config, &x, &self.positions, &self.graph, &self.device);
+        Ok((plain, burn.map(values)))
     }
 
     /// Physical fields from the network's scaled `[nodes, 1, 6]` output.

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::Result;
 use crate::data::Prepared;
-use crate::engine::{Fields, Npe};
+use crate::engine::{Fields, Npe, contact_state};
 use crate::stiffness::ForceFromDisplacement;
 
 /// Major over minor second moment of a contact patch above which its orientation counts: a
@@ -24,7 +24,8 @@ pub struct SampleScore {
     pub setup: String,
     /// Depth, mm.
     pub depth_mm: f64,
-    /// Share of top nodes whose contact state (-u_z > 30 um) the engine gets right.
+    /// Share of top nodes whose contact state the engine gets right (the FEM's: -u_z > 30 um;
+    /// the engine's: its contact head when it has one, else the same rule on its u_z).
     pub contact_accuracy: f64,
     /// Nodal displacement RMSE over the top nodes, mm.
     pub rmse_mm: f64,
@@ -190,11 +191,11 @@ pub fn fit_stiffness(
     )
 }
 
-/// Classifies the contact state of every top node of a prediction against the FEM and
+/// Classifies the predicted contact state `pred` of every top node against the FEM's and
 /// sorts the wrong ones: `pen_m` is each node's penetration by the contact points, `edges` the
 /// top-face graph.
 pub fn breakdown(
-    pred_m: &[[f64; 3]],
+    pred: &[bool],
     fem_m: &[[f64; 3]],
     pen_m: &[f64],
     edges: &[[usize; 2]],
@@ -206,8 +207,8 @@ pub fn breakdown(
     }
     let mut c = ContactBreakdown::default();
     let mut rule_right = 0;
-    for (v, (a, b)) in pred_m.iter().zip(fem_m).enumerate() {
-        let (p, t) = (-a[2] > CONTACT_THRESHOLD_M, -b[2] > CONTACT_THRESHOLD_M);
+    for (v, (&p, b)) in pred.iter().zip(fem_m).enumerate() {
+        let t = -b[2] > CONTACT_THRESHOLD_M;
         c.fem_contact += usize::from(t);
         if (pen_m[v] > CONTACT_THRESHOLD_M) == t {
             rule_right += 1;
@@ -224,7 +225,7 @@ pub fn breakdown(
             c.wrong_rim += 1;
         }
     }
-    c.penetration_rule_accuracy = rule_right as f64 / pred_m.len().max(1) as f64;
+    c.penetration_rule_accuracy = rule_right as f64 / pred.len().max(1) as f64;
     c
 }
 
@@ -272,8 +273,9 @@ pub fn evaluate_with(
     let mut nodal_count = [0usize; 2];
     for chunk in idx.chunks(batch.max(1)) {
         let x = p.inputs(&npe.config, chunk);
-        let (out, _) = npe.net().forward(&npe.config, &x, pos, graph, device);
+        let (out, logits, _) = npe.net().forward_full(&npe.config, &x, pos, graph, device);
         let out = values(out);
+        let logits = logits.map(values);
         let b = chunk.len();
         for (j, &i) in chunk.iter().enumerate() {
             let s = &p.samples[i];
@@ -294,17 +296,20 @@ pub fn evaluate_with(
                 .chunks(6)
                 .map(|r| [0, 1, 2].map(|k| f64::from(r[k]) * sc))
                 .collect();
-            let right = pred
-                .displacement_m
+            let mine_logits: Option<Vec<f32>> = logits
+                .as_ref()
+                .map(|z| (0..n).map(|v| z[v * b + j]).collect());
+            let pred_contact = contact_state(&pred.displacement_m, mine_logits.as_deref());
+            let right = pred_contact
                 .iter()
                 .zip(&truth)
-                .filter(|(a, b)| (-a[2] > CONTACT_THRESHOLD_M) == (-b[2] > CONTACT_THRESHOLD_M))
+                .filter(|(a, b)| **a == (-b[2] > CONTACT_THRESHOLD_M))
                 .count();
             let pen: Vec<f64> = x.node_depth[j * n..(j + 1) * n]
                 .iter()
                 .map(|&d| f64::from(d) * npe.config.scales.z_m)
                 .collect();
-            let contact = breakdown(&pred.displacement_m, &truth, &pen, &p.edges);
+            let contact = breakdown(&pred_contact, &truth, &pen, &p.edges);
             let fs = npe.config.scales.nodal_force_n;
             let mut nf = [0.0; 2];
             let mut nc = 0usize;
@@ -443,7 +448,7 @@ mod tests {
         let fem = [z(50.0), z(80.0), z(35.0), z(0.0)];
         // Node 0 missed (rim, 50 um: not near the threshold), node 1 right, node 2 missed
         // (rim, 35 um: near the threshold), node 3 a false positive (no penetrated neighbour).
-        let pred = [z(10.0), z(80.0), z(25.0), z(31.0)];
+        let pred = [z(10.0), z(80.0), z(25.0), z(31.0)].map(|u| -u[2] > CONTACT_THRESHOLD_M);
         let pen = [0.0, 80e-6, 0.0, 0.0];
         let c = breakdown(&pred, &fem, &pen, &[[0, 1], [1, 2], [2, 3]]);
         assert_eq!(c.fem_contact, 3);

@@ -1,8 +1,13 @@
 //! Training the engine with the shared loop of `ocm-learn` (loss eq 6.17).
 
+use std::path::PathBuf;
+
+use ocm_learn::burn::module::Module;
+use ocm_learn::burn::tensor::activation::log_sigmoid;
 use ocm_learn::burn::tensor::{Device, Tensor, TensorData};
 use ocm_learn::gcn::Graph;
 use ocm_learn::{EpochRecord, Split, TrainConfig, cpu_autodiff, train_split};
+use ocm_tactile::mask::CONTACT_THRESHOLD_M;
 use serde::{Deserialize, Serialize};
 
 use crate::data::{Prepared, SetupSplit};
@@ -41,6 +46,18 @@ pub struct FitOptions {
     /// The contact prior on the readout ([`NpeConfig::contact_prior`]).
     #[serde(default)]
     pub contact_prior: bool,
+    /// The contact head ([`NpeConfig::contact_head`]).
+    #[serde(default)]
+    pub contact_head: bool,
+    /// Weight of the contact head's cross-entropy ([`NpeConfig::lambda_contact`]).
+    #[serde(default)]
+    pub lambda_contact: f64,
+    /// Fine-tune this trained engine (`npe.ckpt`) instead of starting from random weights:
+    /// its architecture and scales are kept (`width`, `layers`, the inputs and the contact
+    /// prior of these options are ignored), the loss weights and the contact head are these
+    /// options'. The split must be the one it was trained with.
+    #[serde(default)]
+    pub init_from: Option<PathBuf>,
     /// Show a progress bar.
     pub progress: bool,
 }
@@ -61,6 +78,9 @@ impl Default for FitOptions {
             layers: 6,
             lambda_total: 0.0,
             contact_prior: false,
+            contact_head: false,
+            lambda_contact: 1.0,
+            init_from: None,
             progress: false,
         }
     }
@@ -88,7 +108,8 @@ pub struct FitReport {
 /// Mean squared error of the scaled displacement plus `lambda` times that of the scaled nodal
 /// force (eq 6.17), over the samples `batch`, plus `lambda_total` times the mean squared error
 /// of the summed nodal force in newtons (a per-node error too small for the first two terms
-/// adds up over 2,552 nodes to the resultant).
+/// adds up over 2,552 nodes to the resultant), plus, with a contact head, `lambda_contact`
+/// times the mean binary cross-entropy of its logits against the FEM's contact flags.
 pub fn loss(
     net: &NpeNet,
     cfg: &NpeConfig,
@@ -99,7 +120,7 @@ pub fn loss(
     device: &Device,
 ) -> Tensor<1> {
     let x = p.inputs(cfg, batch);
-    let (out, _) = net.forward(cfg, &x, positions, graph, device);
+    let (out, logits, _) = net.forward_full(cfg, &x, positions, graph, device);
     let n = p.rest_m.len();
     let b = batch.len();
     let mut t = Vec::with_capacity(b * n * 6);
@@ -111,13 +132,57 @@ pub fn loss(
     let sq = d.clone() * d.clone();
     let mu = sq.clone().slice([0..n, 0..b, 0..3]).mean();
     let mf = sq.slice([0..n, 0..b, 3..6]).mean();
-    let loss = mu + mf * cfg.lambda;
+    let mut loss = mu + mf * cfg.lambda;
     if cfg.lambda_total > 0.0 {
         let total = d.slice([0..n, 0..b, 3..6]).sum_dim(0) * cfg.scales.nodal_force_n;
-        loss + (total.clone() * total).mean() * cfg.lambda_total
-    } else {
-        loss
+        loss = loss + (total.clone() * total).mean() * cfg.lambda_total;
     }
+    match logits {
+        Some(z) if cfg.lambda_contact > 0.0 => {
+            let y = contact_flags(p, batch, cfg.scales.displacement_m);
+            let y = Tensor::<3>::from_data(TensorData::new(y, [b, n, 1]), device).swap_dims(0, 1);
+            loss + bce_with_logits(z, y) * cfg.lambda_contact
+        }
+        _ => loss,
+    }
+}
+
+/// The FEM's contact flag of every node of samples `batch` (1 where -u_z > 30 um, the
+/// threshold of the contact-node metric), sample after sample; `displacement_m` is the
+/// targets' displacement unit.
+pub fn contact_flags(p: &Prepared, batch: &[usize], displacement_m: f64) -> Vec<f32> {
+    let t = (-CONTACT_THRESHOLD_M / displacement_m) as f32;
+    batch
+        .iter()
+        .flat_map(|&i| p.samples[i].target.chunks(6).map(|r| f32::from(r[2] < t)))
+        .collect()
+}
+
+/// Mean binary cross-entropy of logits `z` against 0/1 targets `y` (in the log-sigmoid form,
+/// finite for any logit).
+pub fn bce_with_logits<const D: usize>(z: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
+    let pos = log_sigmoid(z.clone());
+    let neg = log_sigmoid(z.neg());
+    let ones = y.ones_like();
+    (y.clone() * pos + (ones - y) * neg).mean().neg()
+}
+
+/// The engine at `path` for fine-tuning, after checking it was trained on `split`: another
+/// split would put its training set-ups into the held-out ones.
+fn start_from(path: &std::path::Path, split: &SetupSplit) -> Result<Npe> {
+    let npe = Npe::load(path)?;
+    let stored: SetupSplit = serde_json::from_value(Npe::run_meta(path)?["split"].clone())
+        .map_err(|e| NpeError::Data(format!("{}: no set-up split stored: {e}", path.display())))?;
+    if &stored != split {
+        return Err(NpeError::Input(format!(
+            "{} was trained on another split of set-ups (test {:?}, validation {:?}); \
+             fine-tune with the seed and held-out counts it was trained with",
+            path.display(),
+            stored.test,
+            stored.val
+        )));
+    }
+    Ok(npe)
 }
 
 /// Trains an engine on `p` split by set-up.
@@ -130,13 +195,35 @@ pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
     if idx.train.is_empty() {
         return Err(NpeError::Data("no training samples".into()));
     }
-    let mut cfg = NpeConfig::new(Prepared::top_center(&p.rest_m), p.spacing_m);
-    cfg.use_geometry = opts.use_geometry;
-    cfg.use_force = opts.use_force;
-    cfg.width = opts.width;
-    cfg.layers = opts.layers;
+    let start = match &opts.init_from {
+        Some(path) => Some(start_from(path, &split)?),
+        None => None,
+    };
+    let mut cfg = match &start {
+        Some(npe) => npe.config.clone(),
+        None => {
+            let mut cfg = NpeConfig::new(Prepared::top_center(&p.rest_m), p.spacing_m);
+            cfg.use_geometry = opts.use_geometry;
+            cfg.use_force = opts.use_force;
+            cfg.width = opts.width;
+            cfg.layers = opts.layers;
+            cfg.contact_prior = opts.contact_prior;
+            cfg
+        }
+    };
     cfg.lambda_total = opts.lambda_total;
-    cfg.contact_prior = opts.contact_prior;
+    cfg.contact_head = opts.contact_head || cfg.contact_head;
+    cfg.lambda_contact = if cfg.contact_head {
+        opts.lambda_contact
+    } else {
+        0.0
+    };
+    if !(cfg.lambda_contact.is_finite() && cfg.lambda_contact >= 0.0) {
+        return Err(NpeError::Input(format!(
+            "contact loss weight {} must be finite and not negative",
+            cfg.lambda_contact
+        )));
+    }
     let surface = Surface {
         rest_m: p.rest_m.clone(),
         edges: p.edges.clone(),
@@ -149,7 +236,34 @@ pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
     let pos_ad = Tensor::<3>::from_data(TensorData::new(pos.clone(), [n, 1, 3]), &ad);
     let pos_plain = Tensor::<3>::from_data(TensorData::new(pos, [n, 1, 3]), &plain);
     let (g_ad, g_plain) = (graph.tensors(&ad), graph.tensors(&plain));
-    let net = cfg.init(&ad, opts.seed)?;
+    let net = match start {
+        Some(npe) => {
+            // The stored surface went through JSON: compare positions to a nanometre.
+            let same_nodes = npe.surface.rest_m.len() == p.rest_m.len()
+                && npe
+                    .surface
+                    .rest_m
+                    .iter()
+                    .zip(&p.rest_m)
+                    .all(|(a, b)| (0..3).all(|k| (a[k] - b[k]).abs() < 1e-9));
+            if !same_nodes || npe.surface.edges != p.edges {
+                return Err(NpeError::Data(
+                    "the engine to fine-tune was trained on another top surface".into(),
+                ));
+            }
+            // A net built on the autodiff device takes the trained weights, so the optimiser
+            // tracks them (the loaded engine lives on the plain device).
+            let net = npe
+                .config
+                .init(&ad, opts.seed)?
+                .load_record(npe.net().clone().into_record());
+            match (net.contact.is_some(), cfg.contact_head) {
+                (false, true) => net.with_contact_head(Some(cfg.contact_head_init(&ad, opts.seed))),
+                _ => net,
+            }
+        }
+        None => cfg.init(&ad, opts.seed)?,
+    };
     let t0 = std::time::Instant::now();
     let report = train_split(
         net,

@@ -16,6 +16,7 @@ pub struct Kernel {
     fusion: DenseMlp,
     gcn: DenseGcn,
     readout: DenseMlp,
+    contact: Option<DenseMlp>,
     /// Scaled rest positions, `[nodes, 3]`.
     positions: Vec<f32>,
     use_geometry: bool,
@@ -23,6 +24,8 @@ pub struct Kernel {
     geometry_features: usize,
     /// Scaled-penetration-to-displacement factor when the readout carries the contact prior.
     prior: Option<f32>,
+    /// Gain and offset of the contact head's threshold rule ([`NpeConfig::contact_rule`]).
+    rule: (f32, f32),
 }
 
 impl Kernel {
@@ -34,11 +37,13 @@ impl Kernel {
             fusion: DenseMlp::from_mlp(&net.fusion),
             gcn: DenseGcn::new(&net.gcn, graph),
             readout: DenseMlp::from_mlp(&net.readout),
+            contact: net.contact.as_ref().map(DenseMlp::from_mlp),
             positions,
             use_geometry: cfg.use_geometry,
             use_force: cfg.use_force,
             geometry_features: cfg.geometry_features,
             prior: cfg.contact_prior.then(|| cfg.depth_to_displacement()),
+            rule: cfg.contact_rule(),
         }
     }
 
@@ -62,6 +67,17 @@ impl Kernel {
     /// Scaled nodal (displacement, force) of the first sample of `x`, `[nodes, 6]`, and its
     /// h_global.
     pub fn forward(&self, x: &Inputs) -> (Vec<f32>, Vec<f32>) {
+        let (out, _, hg) = self.run(x, false);
+        (out, hg)
+    }
+
+    /// [`Kernel::forward`] and the contact head's logit per node (None without a head).
+    pub fn forward_full(&self, x: &Inputs) -> (Vec<f32>, Option<Vec<f32>>, Vec<f32>) {
+        self.run(x, true)
+    }
+
+    /// The pass, with the contact head only when asked (it costs about a tenth of a call).
+    fn run(&self, x: &Inputs, with_head: bool) -> (Vec<f32>, Option<Vec<f32>>, Vec<f32>) {
         let hg = self.global(x);
         let n = self.nodes();
         let width = self.gcn.width();
@@ -74,6 +90,11 @@ impl Kernel {
         }
         debug_assert_eq!(h.len(), n * width);
         self.gcn.forward(&mut h, 1);
+        let head = self
+            .contact
+            .as_ref()
+            .filter(|_| with_head)
+            .map(|c| c.forward_rows(&h, n));
         let mut out = self.readout.forward_rows(&h, n);
         if let (Some(k), Some(d)) = (self.prior, depth)
             && x.node_gate.len() >= n
@@ -85,6 +106,13 @@ impl Kernel {
                 }
             }
         }
-        (out, hg)
+        let logits = head.map(|mut z| {
+            let (gain, t) = self.rule;
+            for (l, row) in z.iter_mut().zip(out.chunks(6)) {
+                *l += (-row[2] - t) * gain;
+            }
+            z
+        });
+        (out, logits, hg)
     }
 }

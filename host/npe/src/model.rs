@@ -13,6 +13,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::{NpeError, Result};
 
+/// Displacement past the contact threshold that the contact head's rule term turns into one
+/// logit, m.
+pub const CONTACT_RULE_WIDTH_M: f64 = 10e-6;
+
 /// Architecture name stored in checkpoints.
 pub const ARCHITECTURE: &str = "npe/ga-gnn";
 
@@ -88,6 +92,15 @@ pub struct NpeConfig {
     /// existed (then not stored, so those still load).
     #[serde(default, skip_serializing_if = "is_false")]
     pub contact_prior: bool,
+    /// A contact head beside the readout: a logit per node of "in contact in the FEM"
+    /// (-u_z > 30 um), trained with a binary cross-entropy on the FEM's own contact flags, so
+    /// the contact state is classified rather than read off a threshold on the regressed u_z.
+    /// False in checkpoints written before it existed (then not stored).
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub contact_head: bool,
+    /// Weight of the contact head's cross-entropy in the loss (0 when there is no head).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub lambda_contact: f64,
 }
 
 fn is_zero(v: &f64) -> bool {
@@ -125,6 +138,8 @@ impl NpeConfig {
             lambda: 1.0,
             lambda_total: 0.0,
             contact_prior: false,
+            contact_head: false,
+            lambda_contact: 0.0,
         }
     }
 
@@ -182,7 +197,27 @@ impl NpeConfig {
             .init(device, seed.wrapping_add(20)),
             readout: MlpConfig::relu(self.width, &[self.readout_hidden], 6)
                 .init(device, seed.wrapping_add(30)),
+            contact: self
+                .contact_head
+                .then(|| self.contact_head_init(device, seed)),
         })
+    }
+
+    /// Gain and offset of the threshold rule inside the contact head's logit, in the scaled
+    /// displacement: `logit = head(h) + gain (-u_z - t)`, t being the metric's 30 um. The head
+    /// starts near the rule on the regressed u_z ([`CONTACT_RULE_WIDTH_M`] past the threshold
+    /// = 1 logit) and learns the correction where the rule fails.
+    pub fn contact_rule(&self) -> (f32, f32) {
+        let unit = self.scales.displacement_m;
+        (
+            (unit / CONTACT_RULE_WIDTH_M) as f32,
+            (ocm_tactile::mask::CONTACT_THRESHOLD_M / unit) as f32,
+        )
+    }
+
+    /// A fresh contact head (final node state -> readout width -> one logit).
+    pub fn contact_head_init(&self, device: &Device, seed: u64) -> Mlp {
+        MlpConfig::relu(self.width, &[self.readout_hidden], 1).init(device, seed.wrapping_add(40))
     }
 }
 
@@ -221,6 +256,7 @@ pub struct NpeNet {
     pub(crate) fusion: Mlp,
     pub(crate) gcn: Gcn,
     pub(crate) readout: Mlp,
+    pub(crate) contact: Option<Mlp>,
 }
 
 impl NpeNet {
@@ -266,6 +302,27 @@ impl NpeNet {
         graph: &GraphTensors,
         device: &Device,
     ) -> (Tensor<3>, Tensor<2>) {
+        let (out, _, hg) = self.forward_full(cfg, x, positions, graph, device);
+        (out, hg)
+    }
+
+    /// Replaces the contact head (None removes it): fine-tuning a trained engine with a new
+    /// head keeps the rest of the network.
+    pub fn with_contact_head(mut self, head: Option<Mlp>) -> Self {
+        self.contact = head;
+        self
+    }
+
+    /// [`NpeNet::forward`] and the contact head's logits `[nodes, batch, 1]` (None without a
+    /// head).
+    pub fn forward_full(
+        &self,
+        cfg: &NpeConfig,
+        x: &Inputs,
+        positions: &Tensor<3>,
+        graph: &GraphTensors,
+        device: &Device,
+    ) -> (Tensor<3>, Option<Tensor<3>>, Tensor<2>) {
         let b = x.counts.len();
         let n = positions.dims()[0];
         let hg = self.global(cfg, x, device);
@@ -280,9 +337,18 @@ impl NpeNet {
             2,
         );
         let h = self.gcn.forward(h0, graph);
+        let head = self.contact.as_ref().map(|c| c.forward(h.clone()));
         let out = self.readout.forward(h);
+        let with_rule = |out: Tensor<3>| {
+            let logits = head.map(|z| {
+                let uz = out.clone().slice([0..n, 0..b, 2..3]);
+                let (gain, t) = cfg.contact_rule();
+                z + (uz.neg() - t) * gain
+            });
+            (out, logits, hg)
+        };
         if !cfg.contact_prior || x.node_depth.len() != b * n || x.node_gate.len() != b * n {
-            return (out, hg);
+            return with_rule(out);
         }
         let k = cfg.depth_to_displacement();
         let (mut mul, mut add) = (vec![0.0; n * b * 6], vec![0.0; n * b * 6]);
@@ -296,6 +362,6 @@ impl NpeNet {
         }
         let mul = Tensor::<3>::from_data(TensorData::new(mul, [n, b, 6]), device);
         let add = Tensor::<3>::from_data(TensorData::new(add, [n, b, 6]), device);
-        (out * mul + add, hg)
+        with_rule(out * mul + add)
     }
 }

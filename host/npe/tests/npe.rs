@@ -389,3 +389,200 @@ fn training_with_the_contact_prior_cuts_the_loss() {
     // Measured: 1.61 -> 0.57.
     assert!(last < 0.5 * first, "train loss {first} -> {last}");
 }
+
+/// The contact head's loss: the mean binary cross-entropy against hand-computed values
+/// (-ln sigma(z) for a 1, -ln(1 - sigma(z)) for a 0), finite at large logits.
+#[test]
+fn cross_entropy_of_the_contact_head_matches_the_formula() {
+    use ocm_learn::burn::tensor::{Tensor, TensorData};
+    let z = [0.0f32, 2.0, -3.0, 40.0, -40.0];
+    let y = [1.0f32, 0.0, 0.0, 1.0, 1.0];
+    let d = cpu();
+    let got = ocm_learn::values(ocm_npe::fit::bce_with_logits(
+        Tensor::<1>::from_data(TensorData::new(z.to_vec(), [5]), &d),
+        Tensor::<1>::from_data(TensorData::new(y.to_vec(), [5]), &d),
+    ))[0];
+    let sig = |v: f64| 1.0 / (1.0 + (-v).exp());
+    let want: f64 = z
+        .iter()
+        .zip(&y)
+        .map(|(&z, &y)| {
+            let z = f64::from(z);
+            if y > 0.5 {
+                // ln(1 + e^-z), written so z = -40 stays exact.
+                -z.min(0.0) + (-z.abs()).exp().ln_1p()
+            } else {
+                -(1.0 - sig(z)).ln()
+            }
+        })
+        .sum::<f64>()
+        / 5.0;
+    assert!(got.is_finite());
+    assert!((f64::from(got) - want).abs() < 1e-5, "{got} vs {want}");
+}
+
+/// The head's targets are the FEM contact flags of the metric (-u_z > 30 um): on the synthetic
+/// dent -u_z = d exp(-r^2 / 2 mm^2), so a node is in contact iff that exceeds 30 um.
+#[test]
+fn contact_flags_are_the_fem_contact_nodes() {
+    let p = synthetic();
+    let s = &p.samples[5];
+    let flags = ocm_npe::fit::contact_flags(&p, &[0, 5], 1e-4);
+    let n = p.rest_m.len();
+    assert_eq!(flags.len(), 2 * n);
+    let (cx, cy) = (2e-3, 2e-3);
+    let mut on = 0;
+    for (v, q) in p.rest_m.iter().enumerate() {
+        let r2 = (q[0] - cx).powi(2) + (q[1] - cy).powi(2);
+        let want = s.depth_m * (-r2 / 2e-6).exp() > 30e-6;
+        assert_eq!(flags[n + v] == 1.0, want, "node {v}");
+        on += usize::from(want);
+    }
+    assert!(on > 3 && on < n, "{on} contact nodes");
+}
+
+fn engine_with_head(seed: u64, prior: bool) -> Npe {
+    let s = surface();
+    let mut cfg = NpeConfig::new(Prepared::top_center(&s.rest_m), 0.25e-3);
+    cfg.layers = 3;
+    cfg.width = 12;
+    cfg.contact_prior = prior;
+    cfg.contact_head = true;
+    cfg.lambda_contact = 1.0;
+    let net = cfg.init(&cpu(), seed).unwrap();
+    Npe::new(net, cfg, s).unwrap()
+}
+
+/// The contact head: the plain kernel computes burn's logits, the order of the contact points
+/// does not change them, no point means no node in contact, and `predict_contact` reads the
+/// state off the head (logit > 0).
+#[test]
+fn contact_head_kernel_matches_burn_and_ignores_point_order() {
+    for prior in [false, true] {
+        let npe = engine_with_head(11, prior);
+        assert!(npe.has_contact_head());
+        let pts = cap(3.2e-3, 2.4e-3, 0.4e-3);
+        let (a, b) = npe.contact_logits_both(&pts, 1.5, 0.4e-3).unwrap();
+        let (a, b) = (a.unwrap(), b.unwrap());
+        assert_eq!(a.len(), npe.surface.rest_m.len());
+        assert_eq!(a.len(), b.len());
+        assert!(b.iter().any(|v| v.abs() > 1e-3));
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() <= 1e-4 * (1.0 + y.abs()), "{x} vs {y}");
+        }
+        let (f, c) = npe.predict_contact(&pts, 1.5, 0.4e-3).unwrap();
+        assert_eq!(c, a.iter().map(|&v| v > 0.0).collect::<Vec<_>>());
+        assert_eq!(f, npe.predict(&pts, 1.5, 0.4e-3).unwrap());
+        let mut shuffled = pts.clone();
+        shuffled.reverse();
+        shuffled.rotate_left(7);
+        let (a2, _) = npe.contact_logits_both(&shuffled, 1.5, 0.4e-3).unwrap();
+        for (x, y) in a.iter().zip(&a2.unwrap()) {
+            assert!((x - y).abs() < 1e-5, "{x} vs {y}");
+        }
+        let (_, none) = npe.predict_contact(&[], 0.0, 0.0).unwrap();
+        assert!(none.iter().all(|&c| !c));
+    }
+    // Without a head the state is -u_z > 30 um of the predicted field.
+    let npe = engine(3);
+    let pts = cap(3e-3, 2.5e-3, 0.3e-3);
+    let (f, c) = npe.predict_contact(&pts, 1.2, 0.3e-3).unwrap();
+    let want: Vec<bool> = f.displacement_m.iter().map(|u| -u[2] > 30e-6).collect();
+    assert_eq!(c, want);
+}
+
+/// Fine-tuning starts from the trained weights (at a vanishing step size the fields stay the
+/// source's), adds a contact head, refuses another split, and the head learns the known
+/// contact nodes of the synthetic dents.
+#[test]
+fn fine_tuning_adds_a_contact_head_that_learns_the_contact_nodes() {
+    let p = synthetic();
+    let src = fit(&p, &small_fit(4)).unwrap();
+    let path = std::env::temp_dir().join(format!("ocm-npe-ft-{}.ckpt", std::process::id()));
+    src.npe
+        .save(&path, serde_json::json!({"split": src.split}))
+        .unwrap();
+    let frozen = fit(
+        &p,
+        &FitOptions {
+            epochs: 1,
+            learning_rate: 1e-12,
+            contact_head: true,
+            init_from: Some(path.clone()),
+            ..small_fit(4)
+        },
+    )
+    .unwrap();
+    assert!(frozen.npe.has_contact_head() && !src.npe.has_contact_head());
+    for s in &p.samples[..6] {
+        let a = src
+            .npe
+            .predict(&s.points_m, s.force_n[2], s.depth_m)
+            .unwrap();
+        let b = frozen
+            .npe
+            .predict(&s.points_m, s.force_n[2], s.depth_m)
+            .unwrap();
+        for (x, y) in a.displacement_m.iter().zip(&b.displacement_m) {
+            for k in 0..3 {
+                assert!((x[k] - y[k]).abs() < 1e-9, "{x:?} vs {y:?}");
+            }
+        }
+    }
+    let other = fit(
+        &p,
+        &FitOptions {
+            init_from: Some(path.clone()),
+            ..small_fit(5)
+        },
+    );
+    assert!(
+        other
+            .as_ref()
+            .is_err_and(|e| e.to_string().contains("another split")),
+        "{other:?}"
+    );
+    let tuned = fit(
+        &p,
+        &FitOptions {
+            epochs: 60,
+            patience: 0,
+            contact_head: true,
+            lambda_contact: 1.0,
+            init_from: Some(path.clone()),
+            ..small_fit(4)
+        },
+    )
+    .unwrap();
+    std::fs::remove_file(&path).ok();
+    let n = p.rest_m.len();
+    let (mut right, mut right_before, mut total) = (0usize, 0usize, 0usize);
+    for (i, s) in p.samples.iter().enumerate() {
+        let want = ocm_npe::fit::contact_flags(&p, &[i], 1e-4);
+        let (_, c) = tuned
+            .npe
+            .predict_contact(&s.points_m, s.force_n[2], s.depth_m)
+            .unwrap();
+        let (_, c0) = src
+            .npe
+            .predict_contact(&s.points_m, s.force_n[2], s.depth_m)
+            .unwrap();
+        right += c
+            .iter()
+            .zip(&want)
+            .filter(|(a, w)| **a == (**w == 1.0))
+            .count();
+        right_before += c0
+            .iter()
+            .zip(&want)
+            .filter(|(a, w)| **a == (**w == 1.0))
+            .count();
+        total += n;
+    }
+    let (acc, acc0) = (
+        right as f64 / total as f64,
+        right_before as f64 / total as f64,
+    );
+    eprintln!("contact-node accuracy: source (-u_z > 30 um) {acc0:.4}, fine-tuned head {acc:.4}");
+    assert!(acc > 0.95 && acc > acc0, "{acc0} -> {acc}");
+}

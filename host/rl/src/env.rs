@@ -7,7 +7,7 @@
 //! mapped to the middle of each joint range plus the value times its half-width.
 
 use crate::error::{Result, RlError};
-use crate::reward::combined_reward;
+use crate::reward::{approach_force_error, combined_reward};
 use crate::robot::{Load, Robot};
 use crate::tasks::{ContactConfig, Episode, POINTS, TaskKind};
 use nalgebra::Vector3;
@@ -62,6 +62,13 @@ pub struct EnvConfig {
     /// targets know (none by default).
     #[serde(default)]
     pub randomisation: Randomisation,
+    /// Stiffness of the approach term of the force reward, N/m (0: eq 4.30 as printed). Out of
+    /// contact, R_F scores the penalty law continued across the surface at this stiffness (a
+    /// virtual pull proportional to the gap, `reward::approach_force_error`), so the force
+    /// reward falls with the distance to the surface instead of being flat. Only the reward
+    /// changes; `StepInfo::force_error_n` stays the measured error.
+    #[serde(default)]
+    pub approach_n_per_m: f64,
 }
 
 /// Per-episode perturbations of the plant, each uniform in [-half-width, half-width] and drawn
@@ -175,6 +182,7 @@ impl EnvConfig {
             lost_distance_m: 0.05,
             contact: ContactConfig::default(),
             randomisation: Randomisation::default(),
+            approach_n_per_m: 0.0,
         }
     }
 
@@ -188,11 +196,13 @@ impl EnvConfig {
             && c.stiffness_n_m > 0.0
             && c.stiffness_n_m.is_finite()
             && c.damping_n_s_m >= 0.0
-            && c.damping_n_s_m.is_finite();
+            && c.damping_n_s_m.is_finite()
+            && self.approach_n_per_m >= 0.0
+            && self.approach_n_per_m.is_finite();
         if !ok {
             return Err(RlError::Invalid(format!(
                 "environment settings out of range: {self:?} (substeps >= 1, noise >= 0, \
-                 lost distance > 0, stiffness > 0, damping >= 0)"
+                 lost distance > 0, stiffness > 0, damping >= 0, approach stiffness >= 0)"
             )));
         }
         Ok(())
@@ -515,7 +525,20 @@ impl Env {
             0.0
         };
         let finite = state.q.iter().chain(state.v.iter()).all(|v| v.is_finite());
-        let reward = combined_reward(ep.task.alpha(), dq, force_err);
+        let k_approach = self.config.approach_n_per_m;
+        let scored_force_err = match (ep.load.surface_gap_m(&p), ep.load.surface_normal(&p)) {
+            (Some(gap), Some(n)) if ep.task.has_force() && k_approach > 0.0 => {
+                approach_force_error(
+                    &[ft.x, ft.y, ft.z],
+                    &[self.force.x, self.force.y, self.force.z],
+                    &[n.x, n.y, n.z],
+                    gap,
+                    k_approach,
+                )
+            }
+            _ => force_err,
+        };
+        let reward = combined_reward(ep.task.alpha(), dq, scored_force_err);
         let terminated = !finite || dq.is_nan() || dq > self.config.lost_distance_m;
         self.point += 1;
         let truncated = !terminated && self.point >= POINTS;

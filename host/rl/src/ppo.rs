@@ -87,10 +87,21 @@ pub struct PpoConfig {
     /// Largest residual correction per action value, action units.
     #[serde(default = "default_residual_scale")]
     pub residual_scale: f64,
+    /// Factor on the exploration standard deviation per action value (theta_x, theta_y, d).
+    /// One action unit moves the TCP about 84 mm sideways (a bend) and 30 mm along z (d, three
+    /// prismatic joints of 0..20 mm) at mid-range, while pressing a plate 1 mm further is
+    /// more than 1 N, so the contact tasks need far less noise than the free paths, and
+    /// differently per action value.
+    #[serde(default = "default_std_scale")]
+    pub std_scale: [f64; ACT_DIM],
 }
 
 fn default_residual_scale() -> f64 {
     0.1
+}
+
+fn default_std_scale() -> [f64; ACT_DIM] {
+    [1.0; ACT_DIM]
 }
 
 impl Default for PpoConfig {
@@ -117,6 +128,7 @@ impl Default for PpoConfig {
             bc_weight: 0.0,
             residual_on: None,
             residual_scale: default_residual_scale(),
+            std_scale: default_std_scale(),
         }
     }
 }
@@ -211,6 +223,12 @@ pub fn train(
             "PPO needs iterations, envs, horizon and minibatch >= 1".into(),
         ));
     }
+    if !cfg.std_scale.iter().all(|v| *v > 0.0 && v.is_finite()) {
+        return Err(RlError::Invalid(format!(
+            "PPO std_scale {:?} must be finite and > 0",
+            cfg.std_scale
+        )));
+    }
     if !(cfg.bc_weight >= 0.0 && cfg.bc_weight.is_finite()) {
         return Err(RlError::Invalid(format!(
             "PPO bc_weight {} must be finite and >= 0",
@@ -298,7 +316,7 @@ pub fn train(
                 let mut lp = 0.0;
                 for k in 0..ACT_DIM {
                     let eps: f64 = StandardNormal.sample(&mut rng);
-                    let a = mean[i * ACT_DIM + k] + std * eps;
+                    let a = mean[i * ACT_DIM + k] + std * cfg.std_scale[k] * eps;
                     lp += -0.5 * eps * eps;
                     acts.push(a);
                 }
@@ -378,7 +396,15 @@ pub fn train(
             None => vec![],
         };
         let mut order: Vec<usize> = (0..n * t_len).collect();
-        let inv2s2 = 0.5 / (std * std);
+        let inv2s2 = ocm_learn::tensor2(
+            cfg.std_scale
+                .iter()
+                .map(|k| (0.5 / (std * std * k * k)) as f32)
+                .collect(),
+            1,
+            ACT_DIM,
+            &device,
+        );
         for _ in 0..cfg.epochs {
             order.shuffle(&mut rng);
             for mb in order.chunks(cfg.minibatch) {
@@ -393,7 +419,7 @@ pub fn train(
                 let mu: Tensor<2> = actor.forward(x.clone());
                 let d = mu.clone() - a;
                 // log N(a; mu, std) up to the constant the old log-probability shares.
-                let logp = (d.clone() * d).sum_dim(1).mul_scalar(-inv2s2 as f32);
+                let logp = (d.clone() * d * inv2s2.clone()).sum_dim(1).neg();
                 let ratio = (logp - old).exp();
                 let s1 = ratio.clone() * ad.clone();
                 let s2 = ratio.clamp(1.0 - cfg.clip as f32, 1.0 + cfg.clip as f32) * ad;

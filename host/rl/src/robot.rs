@@ -99,6 +99,20 @@ impl Load {
         }
     }
 
+    /// Signed distance of `p` from a contact surface along its outward normal, m: positive out
+    /// of contact, negative when pressed in (`None` without a surface).
+    pub fn surface_gap_m(&self, p: &Vector3<f64>) -> Option<f64> {
+        match *self {
+            Load::Plane {
+                point_m, normal, ..
+            } => Some(Vector3::from(normal).dot(&(p - Vector3::from(point_m)))),
+            Load::Sphere {
+                centre_m, radius_m, ..
+            } => Some((p - Vector3::from(centre_m)).norm() - radius_m),
+            _ => None,
+        }
+    }
+
     /// Penalty stiffness of a contact surface, N/m (`None` without one).
     pub fn contact_stiffness(&self) -> Option<f64> {
         match *self {

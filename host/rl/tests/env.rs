@@ -136,6 +136,62 @@ fn plate_contact_balances_the_motors() {
     }
 }
 
+#[test]
+fn approach_term_scores_the_gap_out_of_contact_and_nothing_else() {
+    // Two force-control environments, one with the approach term, driven by the same actions:
+    // the episode's start (5 mm below the plate), a step that stays out of contact, and the
+    // expert's, which presses.
+    let r = robot();
+    let plain = EnvConfig::new(TaskKind::Force);
+    let shaped = EnvConfig {
+        approach_n_per_m: 100.0,
+        ..plain
+    };
+    assert!(
+        Env::new(
+            r.clone(),
+            EnvConfig {
+                approach_n_per_m: f64::NAN,
+                ..plain
+            }
+        )
+        .is_err()
+    );
+    let (mut a, mut b) = (
+        Env::new(r.clone(), plain).unwrap(),
+        Env::new(r.clone(), shaped).unwrap(),
+    );
+    assert_eq!(a.reset(4).unwrap(), b.reset(4).unwrap());
+    let Some(Load::Plane { point_m, .. }) = b.load() else {
+        panic!("force task has a plate")
+    };
+    let low = [0.0, 0.0, -1.0];
+    let (mut out, mut pressed) = (0, 0);
+    for k in 0..8 {
+        let expert = b.expert_action().unwrap();
+        let act = if k < 2 { low } else { expert };
+        let (sa, sb) = (a.step(&act).unwrap(), b.step(&act).unwrap());
+        assert_eq!(sa.obs, sb.obs);
+        assert_eq!(sa.info, sb.info);
+        let f_ref = Vector3::from(sb.info.force_target_n).norm();
+        let gap = point_m[2] - sb.info.tcp_m[2];
+        if gap > 0.0 {
+            out += 1;
+            assert_eq!(sb.info.force_error_n, f_ref);
+            assert!((sa.reward - (1.0 - 0.5 * f_ref)).abs() < 1e-12);
+            let want = 1.0 - 0.5 * (f_ref + 100.0 * gap);
+            assert!((sb.reward - want).abs() < 1e-9, "{} vs {want}", sb.reward);
+        } else {
+            pressed += 1;
+            assert_eq!(sa.reward, sb.reward);
+        }
+    }
+    assert!(
+        out >= 2 && pressed >= 3,
+        "{out} steps out of contact, {pressed} pressing"
+    );
+}
+
 fn random_actions(seed: u64, n: usize) -> Vec<[f64; 3]> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     (0..n)

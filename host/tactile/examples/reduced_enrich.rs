@@ -12,7 +12,9 @@
 use ocm_tactile::gel::{Gel, GelMaterial};
 use ocm_tactile::indent::Approach;
 use ocm_tactile::indenter::Indenter;
-use ocm_tactile::reduced::{FemSequence, ReducedModel, RestStiffness, placement_model};
+use ocm_tactile::reduced::{
+    DEFAULT_FOOTPRINT_LOADS, Enrichment, FemSequence, ReducedModel, RestStiffness, placement_model,
+};
 use ocm_tactile::setup::{Setup, digit_setups};
 use std::path::{Path, PathBuf};
 
@@ -62,7 +64,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let approach = Approach::new(name, &gel, &indenter, setup.placement)?;
         for &r in &ranks {
             let m = rom.truncated(r)?;
-            let em = placement_model(&m, &rest, &gel, &indenter, &approach, deepest)?;
+            let enrich = Enrichment {
+                rest: &rest,
+                loads: &DEFAULT_FOOTPRINT_LOADS,
+            };
+            let em = placement_model(&m, enrich, &gel, &indenter, &approach, deepest)?;
             let limit = |model: &ReducedModel| -> Result<f64, Box<dyn std::error::Error>> {
                 let mut worst = 0.0f64;
                 for u in &fem.displacement {

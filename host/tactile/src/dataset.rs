@@ -592,7 +592,9 @@ pub fn build(
 
 /// The samples of one set-up from the reduced model: the same depths and arrays as the FEM's
 /// (frictionless, warm-started from depth to depth). Its solve always returns, so nothing
-/// stops early.
+/// stops early. With `enrich`, the basis first grows by the footprint modes of this placement
+/// at its deepest pose ([`crate::reduced::placement_model`]).
+#[allow(clippy::too_many_arguments)]
 pub fn setup_samples_reduced(
     gel: &Gel,
     top: &TopSurface,
@@ -601,8 +603,22 @@ pub fn setup_samples_reduced(
     opts: &DatasetOptions,
     model: &crate::reduced::ReducedModel,
     options: crate::reduced::ReducedOptions,
+    enrich: Option<crate::reduced::Enrichment>,
 ) -> Result<SetupSamples> {
     let indenter = Indenter::from_stl(&setup.stl)?;
+    // Footprint modes of this placement at its deepest pose (README, "The worst held-out frame").
+    let local = match enrich {
+        Some(e) => {
+            let approach =
+                crate::indent::Approach::new(&setup.name, gel, &indenter, setup.placement)?;
+            let deepest = opts.steps as f64 * opts.step_m;
+            Some(crate::reduced::placement_model(
+                model, e, gel, &indenter, &approach, deepest,
+            )?)
+        }
+        None => None,
+    };
+    let model = local.as_ref().unwrap_or(model);
     let mut run = crate::reduced::ReducedIndentation::new(
         &setup.name,
         model,
@@ -634,7 +650,8 @@ pub fn setup_samples_reduced(
 
 /// Builds the data set of `setups` into `out` with the reduced model `model` (saved in
 /// `model_dir`). Resumable: a set-up whose arrays are already in `out` is read back, not
-/// recomputed, so an interrupted run continues where it stopped.
+/// recomputed, so an interrupted run continues where it stopped. With `enrich`, each set-up's
+/// basis grows by its footprint modes, and the manifest's model says which loads.
 #[allow(clippy::too_many_arguments)]
 pub fn build_reduced(
     gel: &Gel,
@@ -644,13 +661,21 @@ pub fn build_reduced(
     model: &crate::reduced::ReducedModel,
     model_dir: &Path,
     options: crate::reduced::ReducedOptions,
+    enrich: Option<crate::reduced::Enrichment>,
     out: &Path,
     progress: impl FnMut(&str, usize),
 ) -> Result<Manifest> {
     model.check_gel(gel)?;
     let top = TopSurface::from_gel(gel);
     let cgrid = ContactGrid::for_gel(gel, opts.grid_spacing_m)?;
-    let tag = format!("reduced:{}", model_dir.display());
+    let tag = match enrich {
+        Some(e) => format!(
+            "reduced:{}+footprint:{}",
+            model_dir.display(),
+            e.loads.join(",")
+        ),
+        None => format!("reduced:{}", model_dir.display()),
+    };
     build_with(gel, mesh_name, &tag, setups, opts, out, progress, |setup| {
         let dir = out.join(&setup.name);
         // `write_setup` writes point_counts.npy last and `write_masks` mask_stats.npy after
@@ -661,7 +686,7 @@ pub fn build_reduced(
             let complete = dir.join("mask_stats.npy").is_file();
             return Ok((s, None, complete));
         }
-        let s = setup_samples_reduced(gel, &top, &cgrid, setup, opts, model, options)?;
+        let s = setup_samples_reduced(gel, &top, &cgrid, setup, opts, model, options, enrich)?;
         Ok((s, None, false))
     })
 }
@@ -1156,6 +1181,7 @@ mod tests {
                 &model,
                 &dir,
                 ro,
+                None,
                 &out,
                 |_, _| {},
             )
@@ -1220,6 +1246,47 @@ mod tests {
         assert!(out.join("a").join("mask_stats.npy").is_file());
         let f3 = ocm_fem::npy::read_f64_2d(&force_a).unwrap().data;
         assert_eq!(f3, marked);
+
+        // With footprint modes: the manifest names them, and each set-up's fields are the
+        // reduced solve on the basis grown at that placement's deepest pose.
+        let rest = crate::reduced::RestStiffness::new(&gel).unwrap();
+        let loads = crate::reduced::DEFAULT_FOOTPRINT_LOADS;
+        let enrich = crate::reduced::Enrichment {
+            rest: &rest,
+            loads: &loads,
+        };
+        let out_e = dir.join("enriched");
+        let me = build_reduced(
+            &gel,
+            "block",
+            &setups,
+            &opts,
+            &model,
+            &dir,
+            ro,
+            Some(enrich),
+            &out_e,
+            |_, _| {},
+        )
+        .unwrap();
+        assert!(me.model.ends_with("+footprint:foot,rim"), "{}", me.model);
+        let de = Dataset::read(&out_e).unwrap();
+        let s = &setups[1];
+        let approach = crate::indent::Approach::new("b", &gel, &ind, s.placement).unwrap();
+        let em =
+            crate::reduced::placement_model(&model, enrich, &gel, &ind, &approach, 150e-6).unwrap();
+        assert!(em.rank() > model.rank());
+        let mut direct =
+            crate::reduced::ReducedIndentation::new("b", &em, &gel, &ind, s.placement, ro).unwrap();
+        let top = TopSurface::from_gel(&gel);
+        for k in 0..3 {
+            let f = direct.advance_to((k + 1) as f64 * 50e-6).unwrap();
+            assert_eq!(
+                de.setups[1].displacement_m[k],
+                em.displacement_of(&top.nodes, &f.q)
+            );
+        }
+        assert_ne!(de.setups[1].displacement_m, b2.displacement_m);
         std::fs::remove_dir_all(&dir).ok();
     }
 

@@ -404,12 +404,21 @@ impl RestStiffness {
 
     /// The linear response at rest (3N, m) to 1 N along -z on each listed node.
     pub fn respond_z(&self, nodes: &[usize]) -> Result<Vec<f64>> {
+        let loads: Vec<(usize, [f64; 3])> = nodes.iter().map(|&i| (i, [0.0, 0.0, -1.0])).collect();
+        self.respond(&loads)
+    }
+
+    /// The linear response at rest (3N, m) to the nodal forces `loads` (node, N); forces on
+    /// fixed dofs are dropped.
+    pub fn respond(&self, loads: &[(usize, [f64; 3])]) -> Result<Vec<f64>> {
         let mut rhs = vec![0.0; self.pattern.num_free()];
-        for &i in nodes {
-            if let Some(&f) = self.pattern.free_of.get(3 * i + 2)
-                && f != usize::MAX
-            {
-                rhs[f] = -1.0;
+        for &(i, f) in loads {
+            for (d, fd) in f.iter().enumerate() {
+                if let Some(&k) = self.pattern.free_of.get(3 * i + d)
+                    && k != usize::MAX
+                {
+                    rhs[k] += fd;
+                }
             }
         }
         self.solver.solve_factored(&mut rhs)?;
@@ -421,12 +430,51 @@ impl RestStiffness {
     }
 }
 
+impl RestStiffness {
+    /// One modified-Newton correction of the field `u` (3N, m) with the rest tangent: the change
+    /// -K_0^{-1} (f_int(X + u) - K_0 u) (3N, m), which keeps the forces the linear model
+    /// balances (K_0 u) and trades its linear internal force for the gel's Neo-Hookean one.
+    pub fn nonlinear_correction(&self, gel: &Gel, u: &[f64]) -> Result<Vec<f64>> {
+        if u.len() != 3 * self.nodes {
+            return Err(TactileError::Input(format!(
+                "a field of {} entries for a gel of {} nodes",
+                u.len(),
+                self.nodes
+            )));
+        }
+        let mut x = gel.model.rest_dofs();
+        for (xi, ui) in x.iter_mut().zip(u) {
+            *xi += ui;
+        }
+        let ev = gel
+            .model
+            .evaluate(&self.pattern, &x, &Loads::default(), 1.0, false)?;
+        let uf: Vec<f64> = self.pattern.dof_of.iter().map(|&d| u[d]).collect();
+        let ku = ocm_fem::solve::spmv(&self.pattern, &self.values, &uf);
+        let mut rhs: Vec<f64> = ku.iter().zip(&ev.residual).map(|(k, r)| k - r).collect();
+        self.solver.solve_factored(&mut rhs)?;
+        let mut du = vec![0.0; 3 * self.nodes];
+        for (j, &d) in self.pattern.dof_of.iter().enumerate() {
+            du[d] = rhs[j];
+        }
+        Ok(du)
+    }
+}
+
 /// Rim width of the footprint's second load (README, "The worst held-out frame"), m.
 pub const FOOTPRINT_RIM_M: f64 = 0.4e-3;
 
-/// The indenter's footprint on the top face from the geometry alone: the top nodes inside
-/// `placed` in the rest configuration, and those of them within `rim_m` of a top node outside.
-pub fn footprint(gel: &Gel, placed: &Placed, rim_m: f64) -> (Vec<usize>, Vec<usize>) {
+/// Nodal forces: (mesh node, force N).
+pub type NodalLoads = Vec<(usize, [f64; 3])>;
+
+/// Candidate loads on a placement's footprint (label, nodal forces N), from the geometry alone:
+/// the top nodes inside `placed` at rest, the outside top nodes, and per footprint node its
+/// nearest outside top node (the in-plane direction out of the footprint, the distance to its edge).
+pub fn footprint_load_cases(
+    gel: &Gel,
+    placed: &Placed,
+    rim_m: f64,
+) -> Vec<(&'static str, NodalLoads)> {
     let at = |i: usize| Vector3::from(gel.mesh.points[i]);
     let inside: Vec<bool> = gel
         .top
@@ -437,36 +485,148 @@ pub fn footprint(gel: &Gel, placed: &Placed, rim_m: f64) -> (Vec<usize>, Vec<usi
     for (&i, &on) in gel.top.iter().zip(&inside) {
         if on { foot.push(i) } else { out.push(i) }
     }
-    let rim = foot
+    if foot.is_empty() {
+        return Vec::new();
+    }
+    let nearest = |i: usize, set: &[usize]| -> (f64, Vector3<f64>) {
+        let mut best = (f64::INFINITY, Vector3::zeros());
+        for &o in set {
+            let mut d = at(o) - at(i);
+            d.z = 0.0;
+            let n = d.norm();
+            if n < best.0 {
+                best = (n, d / n.max(1e-30));
+            }
+        }
+        best
+    };
+    let edge: Vec<(f64, Vector3<f64>)> = foot.iter().map(|&i| nearest(i, &out)).collect();
+    let c = foot.iter().map(|&i| at(i)).sum::<Vector3<f64>>() / foot.len() as f64;
+    let reach = foot
         .iter()
-        .copied()
-        .filter(|&i| out.iter().any(|&o| (at(i) - at(o)).norm() < rim_m))
+        .map(|&i| ((at(i) - c).xy()).norm())
+        .fold(0.0, f64::max)
+        .max(1e-9);
+    let z = |w: f64| [0.0, 0.0, -w];
+    let mut cases: Vec<(&'static str, NodalLoads)> = Vec::new();
+    cases.push(("foot", foot.iter().map(|&i| (i, z(1.0))).collect()));
+    cases.push((
+        "rim",
+        foot.iter()
+            .zip(&edge)
+            .filter(|(_, e)| e.0 < rim_m)
+            .map(|(&i, _)| (i, z(1.0)))
+            .collect(),
+    ));
+    cases.push((
+        "ring2",
+        foot.iter()
+            .zip(&edge)
+            .filter(|(_, e)| e.0 >= rim_m && e.0 < 2.5 * rim_m)
+            .map(|(&i, _)| (i, z(1.0)))
+            .collect(),
+    ));
+    cases.push((
+        "out",
+        foot.iter()
+            .zip(&edge)
+            .map(|(&i, e)| (i, [e.1.x, e.1.y, 0.0]))
+            .collect(),
+    ));
+    cases.push((
+        "out_rim",
+        foot.iter()
+            .zip(&edge)
+            .filter(|(_, e)| e.0 < rim_m)
+            .map(|(&i, e)| (i, [e.1.x, e.1.y, 0.0]))
+            .collect(),
+    ));
+    cases.push((
+        "radial",
+        foot.iter()
+            .map(|&i| {
+                let d = (at(i) - c) / reach;
+                (i, [d.x, d.y, 0.0])
+            })
+            .collect(),
+    ));
+    for (name, k) in [("tilt_x", 0), ("tilt_y", 1)] {
+        cases.push((
+            name,
+            foot.iter()
+                .map(|&i| (i, z((at(i)[k] - c[k]) / reach)))
+                .collect(),
+        ));
+    }
+    let skirt: Vec<(usize, [f64; 3])> = out
+        .iter()
+        .filter_map(|&o| {
+            let (d, v) = nearest(o, &foot);
+            (d < 2.5 * rim_m).then_some((o, [-v.x, -v.y, 0.0]))
+        })
         .collect();
-    (foot, rim)
+    cases.push(("skirt", skirt));
+    cases.retain(|(_, l)| !l.is_empty());
+    cases
 }
 
-/// `model` with two modes of this placement appended: the rest responses to a unit normal load
-/// on the indenter's footprint at `depth_m` and on its rim ([`footprint`]).
+/// Every footprint load [`footprint_load_cases`] knows: the normal loads `foot` (uniform on the
+/// footprint), `rim` (its nodes within the rim width of its edge), `ring2` (the next 1.5 rim
+/// widths inwards), `tilt_x` / `tilt_y` (linear in x / y across it); the in-plane loads `out`
+/// (each footprint node towards its nearest outside top node), `out_rim` (the same on the rim),
+/// `radial` (away from the footprint's centroid, growing with the distance) and `skirt` (outside
+/// top nodes within 2.5 rim widths, away from the footprint).
+pub const FOOTPRINT_LOADS: [&str; 9] = [
+    "foot", "rim", "ring2", "out", "out_rim", "radial", "tilt_x", "tilt_y", "skirt",
+];
+
+/// The footprint loads `--enrich` uses unless told otherwise (README, "The worst held-out frame").
+pub const DEFAULT_FOOTPRINT_LOADS: [&str; 2] = ["foot", "rim"];
+
+/// Per-placement modes: the rest stiffness and the footprint loads whose responses join the basis.
+#[derive(Clone, Copy)]
+pub struct Enrichment<'a> {
+    /// The factorised rest stiffness.
+    pub rest: &'a RestStiffness,
+    /// Labels out of [`FOOTPRINT_LOADS`].
+    pub loads: &'a [&'a str],
+}
+
+/// Checks that every label in `loads` is one of [`FOOTPRINT_LOADS`].
+pub fn check_footprint_loads(loads: &[&str]) -> Result<()> {
+    match loads.iter().find(|l| !FOOTPRINT_LOADS.contains(l)) {
+        Some(bad) => Err(TactileError::Input(format!(
+            "unknown footprint load '{bad}' (known: {})",
+            FOOTPRINT_LOADS.join(", ")
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// `model` with the modes of this placement appended: the rest responses to the footprint
+/// loads `loads` ([`footprint_load_cases`]) of the indenter at `depth_m`, in that order; a load
+/// with no node (e.g. no rim on a footprint a few nodes wide) or one the modes already hold adds none.
 pub fn placement_model(
     model: &ReducedModel,
-    rest: &RestStiffness,
+    enrich: Enrichment,
     gel: &Gel,
     indenter: &Indenter,
     approach: &Approach,
     depth_m: f64,
 ) -> Result<ReducedModel> {
+    check_footprint_loads(enrich.loads)?;
     let placed = Placed {
         indenter,
         pose: approach.pose_at(depth_m),
     };
-    let (foot, rim) = footprint(gel, &placed, FOOTPRINT_RIM_M);
+    let cases = footprint_load_cases(gel, &placed, FOOTPRINT_RIM_M);
     let mut extra = Vec::new();
-    for nodes in [&foot, &rim] {
-        if !nodes.is_empty() {
-            extra.push(rest.respond_z(nodes)?);
+    for l in enrich.loads {
+        if let Some((_, loads)) = cases.iter().find(|(k, _)| k == l) {
+            extra.push(enrich.rest.respond(loads)?);
         }
     }
-    model.with_extra_modes(rest, &extra)
+    model.with_extra_modes(enrich.rest, &extra)
 }
 
 /// Controls of the reduced contact solve.
@@ -945,7 +1105,7 @@ pub fn score_sequence(
     fem: &FemSequence,
     options: ReducedOptions,
     repeats: usize,
-    enrich: Option<&RestStiffness>,
+    enrich: Option<Enrichment>,
 ) -> Result<SequenceScore> {
     let indenter = Indenter::from_stl(&setup.stl)?;
     let mut seconds = Vec::new();
@@ -955,10 +1115,10 @@ pub fn score_sequence(
     for _ in 0..repeats.max(1) {
         let t0 = std::time::Instant::now();
         // Per-placement modes are part of each timed run: a new placement pays for them.
-        if let Some(rest) = enrich {
+        if let Some(enrich) = enrich {
             let approach = Approach::new(&setup.name, gel, &indenter, setup.placement)?;
             local = Some(placement_model(
-                model, rest, gel, &indenter, &approach, deepest,
+                model, enrich, gel, &indenter, &approach, deepest,
             )?);
         }
         let model = local.as_ref().unwrap_or(model);
@@ -1235,7 +1395,11 @@ mod tests {
         let rest = RestStiffness::new(&gel).unwrap();
         let approach = Approach::new("held-out", &gel, &ind, p).unwrap();
         let deepest = *depths.last().unwrap();
-        let em = placement_model(&m, &rest, &gel, &ind, &approach, deepest).unwrap();
+        let enrich = Enrichment {
+            rest: &rest,
+            loads: &DEFAULT_FOOTPRINT_LOADS,
+        };
+        let em = placement_model(&m, enrich, &gel, &ind, &approach, deepest).unwrap();
         let n = em.rank();
         // The sphere's footprint is a few nodes wide, all of them on its rim: one new mode.
         assert_eq!(n, RANK_HELD_OUT + 1);
@@ -1279,5 +1443,180 @@ mod tests {
                 "depth {d}: enriched RMSE {e} of a {rms} field"
             );
         }
+    }
+
+    /// The footprint loads of a flat cylindrical punch (radius 1.2 mm) on the block's 0.5 mm
+    /// grid of top nodes, checked against the geometry: the footprint is the top nodes within
+    /// the radius, the rim those with an outside top node within the rim width, the in-plane
+    /// loads point out of the footprint; the responses solve K_0 u = f, the modified-Newton
+    /// correction is of second order in the field, and every load's mode keeps the grown basis
+    /// orthonormal with the stiffness Phi^T K_0 Phi.
+    #[test]
+    fn footprint_loads_follow_the_indenter_geometry() {
+        let gel = block();
+        let punch = crate::shapes::cylinder(1.2e-3, 2e-3, 64).unwrap();
+        let (cx, cy) = (3e-3, 2e-3);
+        let p = place(cx, cy);
+        let approach = Approach::new("punch", &gel, &punch, p).unwrap();
+        let placed = Placed {
+            indenter: &punch,
+            pose: approach.pose_at(0.1e-3),
+        };
+        let rim_m = 0.6e-3;
+        let cases = footprint_load_cases(&gel, &placed, rim_m);
+        let at = |i: usize| gel.mesh.points[i];
+        let r_of = |i: usize| ((at(i)[0] - cx).powi(2) + (at(i)[1] - cy).powi(2)).sqrt();
+        let nodes = |label: &str| -> Vec<(usize, [f64; 3])> {
+            cases
+                .iter()
+                .find(|(k, _)| *k == label)
+                .map(|(_, l)| l.clone())
+                .unwrap_or_else(|| panic!("no {label} loads"))
+        };
+        let foot: Vec<usize> = nodes("foot").iter().map(|(i, _)| *i).collect();
+        let want: Vec<usize> = gel
+            .top
+            .iter()
+            .copied()
+            .filter(|&i| r_of(i) < 1.2e-3)
+            .collect();
+        let mut sorted = foot.clone();
+        sorted.sort();
+        let mut want_sorted = want.clone();
+        want_sorted.sort();
+        assert_eq!(sorted, want_sorted);
+        assert_eq!(foot.len(), 21);
+        let outside: Vec<usize> = gel
+            .top
+            .iter()
+            .copied()
+            .filter(|i| !foot.contains(i))
+            .collect();
+        let gap = |i: usize| -> f64 {
+            outside
+                .iter()
+                .map(|&o| ((at(o)[0] - at(i)[0]).powi(2) + (at(o)[1] - at(i)[1]).powi(2)).sqrt())
+                .fold(f64::INFINITY, f64::min)
+        };
+        let rim: Vec<usize> = nodes("rim").iter().map(|(i, _)| *i).collect();
+        for &i in &foot {
+            assert_eq!(
+                rim.contains(&i),
+                gap(i) < rim_m,
+                "node {i} at r {}",
+                r_of(i)
+            );
+        }
+        assert!(!rim.is_empty() && rim.len() < foot.len());
+        for label in ["out", "out_rim", "radial", "skirt"] {
+            for (i, f) in nodes(label) {
+                assert_eq!(f[2], 0.0, "{label}: in-plane");
+                let along = f[0] * (at(i)[0] - cx) + f[1] * (at(i)[1] - cy);
+                if r_of(i) > 1e-9 {
+                    assert!(along > 0.0, "{label}: node {i} loaded towards the centre");
+                }
+                if label != "radial" {
+                    assert!(((f[0].powi(2) + f[1].powi(2)).sqrt() - 1.0).abs() < 1e-12);
+                }
+            }
+        }
+        for (i, _) in nodes("skirt") {
+            assert!(!foot.contains(&i) && r_of(i) < 1.2e-3 + 2.5 * rim_m);
+        }
+
+        // Responses: K_0 u = f on the free dofs, nothing on the fixed base.
+        let rest = RestStiffness::new(&gel).unwrap();
+        let loads = nodes("out");
+        let u = rest.respond(&loads).unwrap();
+        let uf: Vec<f64> = rest.pattern.dof_of.iter().map(|&d| u[d]).collect();
+        let ku = ocm_fem::solve::spmv(&rest.pattern, &rest.values, &uf);
+        let mut f = vec![0.0; 3 * gel.num_nodes()];
+        for (i, v) in &loads {
+            for d in 0..3 {
+                f[3 * i + d] += v[d];
+            }
+        }
+        let err: f64 = rest
+            .pattern
+            .dof_of
+            .iter()
+            .zip(&ku)
+            .map(|(&d, k)| (k - f[d]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        assert!(err < 1e-8 * (loads.len() as f64).sqrt(), "K_0 u - f: {err}");
+        let z = rest.respond_z(&foot).unwrap();
+        for i in (0..gel.num_nodes()).filter(|&i| at(i)[2] < 1e-9) {
+            assert_eq!([u[3 * i], u[3 * i + 1], u[3 * i + 2]], [0.0; 3]);
+        }
+
+        // The correction of a field is the nonlinear remainder: second order in the field.
+        let scale = 20e-6 / z.iter().map(|v| v.abs()).fold(0.0, f64::max);
+        let c1 = rest
+            .nonlinear_correction(&gel, &z.iter().map(|v| v * scale).collect::<Vec<_>>())
+            .unwrap();
+        let c2 = rest
+            .nonlinear_correction(&gel, &z.iter().map(|v| 2.0 * v * scale).collect::<Vec<_>>())
+            .unwrap();
+        let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let ratio = norm(&c2) / norm(&c1);
+        println!(
+            "correction of a 20 um field: {:.3e} of it; doubled: ratio {ratio:.3}",
+            norm(&c1) / (scale * norm(&z))
+        );
+        assert!((ratio - 4.0).abs() < 0.2, "second order: ratio {ratio}");
+        assert!(norm(&c1) < 0.05 * scale * norm(&z));
+        assert!(rest.nonlinear_correction(&gel, &[0.0; 3]).is_err());
+
+        // Every load's mode: orthonormal columns, stiffness Phi^T K_0 Phi; a bad label refused.
+        let ind = crate::shapes::sphere(1.5e-3, 32).unwrap();
+        let snaps = fem(&gel, &ind, place(2.5e-3, 2e-3)).1;
+        let opts = PodOptions {
+            truncation: Truncation::Rank(6),
+            oversampling: 4,
+            power_iterations: 1,
+            seed: 3,
+        };
+        let m = ReducedModel::build(&gel, "block", &snaps, vec!["one".into()], &opts).unwrap();
+        let enrich = Enrichment {
+            rest: &rest,
+            loads: &FOOTPRINT_LOADS,
+        };
+        let em = placement_model(&m, enrich, &gel, &punch, &approach, 0.1e-3).unwrap();
+        let n = em.rank();
+        // placement_model's rim is FOOTPRINT_RIM_M, narrower than this grid: no rim loads.
+        let used = footprint_load_cases(&gel, &placed, FOOTPRINT_RIM_M);
+        println!("{} load cases, rank 6 + {}", used.len(), n - 6);
+        assert!(!used.iter().any(|(k, _)| *k == "rim"));
+        assert!(n > 6 + 4 && n <= 6 + used.len());
+        // The grown basis holds every load's response (dependent ones add no mode).
+        for (label, loads) in &used {
+            let u = rest.respond(loads).unwrap();
+            let nodal: Vec<[f64; 3]> = u.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+            let back = em.displacement(&em.project(&nodal));
+            let miss = crate::metrics::nodal_rmse(&back, &nodal).unwrap();
+            let size = crate::metrics::nodal_rmse(&nodal, &vec![[0.0; 3]; nodal.len()]).unwrap();
+            assert!(
+                miss < 1e-6 * size,
+                "{label}: {miss} of {size} outside the basis"
+            );
+        }
+        let rows = em.modes.len() / n;
+        for a in 0..n {
+            for b in 0..n {
+                let dot: f64 = (0..rows)
+                    .map(|d| em.modes[d * n + a] * em.modes[d * n + b])
+                    .sum();
+                let want = if a == b { 1.0 } else { 0.0 };
+                assert!((dot - want).abs() < 1e-9, "columns {a}, {b}: {dot}");
+            }
+        }
+        let k_direct = reduced_stiffness(&gel, &em.modes, n).unwrap();
+        assert!((&k_direct - &em.stiffness).abs().max() < 1e-9 * k_direct.abs().max());
+        let bad = Enrichment {
+            rest: &rest,
+            loads: &["foot", "sideways"],
+        };
+        assert!(placement_model(&m, bad, &gel, &punch, &approach, 0.1e-3).is_err());
     }
 }

@@ -209,6 +209,102 @@ fn mask_loss_is_the_soft_threshold_cross_entropy() {
     );
 }
 
+/// The soft contact IoU term equals a direct sum: loss(w) - loss(0) = w mean over samples of
+/// 1 - (sum p y + eps) / (sum (p + y - p y) + eps), p the sigmoid of the mask term's logit.
+#[test]
+fn iou_loss_is_the_per_sample_soft_jaccard() {
+    let pairs = synthetic(14, 8);
+    let mut data = NetData::new(NetKind::Perception, &pairs);
+    // A few epochs bring the untrained network's output (far off the normalised range, where
+    // the MSE would swamp a term below 1 in f32) near the targets.
+    let split = Split {
+        train: (6..14).collect(),
+        val: (0..6).collect(),
+    };
+    let tc = TrainConfig {
+        epochs: 5,
+        batch_size: 4,
+        learning_rate: 3e-3,
+        val_fraction: 0.0,
+        patience: 0,
+        grad_clip_norm: None,
+        seed: 5,
+        progress: false,
+    };
+    let init = small(NetKind::Perception).init(&cpu_autodiff(), 3).unwrap();
+    let net = nets::train(&data, init, &split, &tc, None).unwrap().model;
+    let idx: Vec<usize> = (0..6).collect();
+    let dev = cpu();
+    let at = |d: &NetData| f64::from(ocm_learn::values(d.loss(&net, &idx, &idx, &dev))[0]);
+    let mse = at(&data);
+    data.iou_loss_weight = 0.5;
+    let with = at(&data);
+    let pred = data.predict(&net, &idx, 6, &dev);
+    let n = ROWS * COLS;
+    let eps = f64::from(nets::SOFT_IOU_EPS);
+    let mut term = 0.0;
+    for k in 0..6 {
+        let (mut inter, mut union) = (0.0, 0.0);
+        let span = k * n..(k + 1) * n;
+        for (dz_pred, dz_true) in pred[span.clone()].iter().zip(&pairs.dz_m[span]) {
+            let z =
+                (1.0 - nets::dz_to_target(f64::from(*dz_pred))) / f64::from(nets::MASK_LOGIT_WIDTH);
+            let p = 1.0 / (1.0 + (-z).exp());
+            let y = f64::from(u8::from(-f64::from(*dz_true) > nets::CONTACT_DZ_M));
+            inter += p * y;
+            union += p + y - p * y;
+        }
+        term += 1.0 - (inter + eps) / (union + eps);
+    }
+    let term = term / 6.0;
+    assert!(term > 0.01, "{term}");
+    assert!(
+        ((with - mse) / 0.5 - term).abs() < 1e-3 * term,
+        "{} vs {term}",
+        (with - mse) / 0.5
+    );
+}
+
+/// Training with the soft IoU term beside the mask term still learns the depth, and does not
+/// on shuffled targets.
+#[test]
+fn perception_with_iou_loss_learns_and_fails_on_shuffled_targets() {
+    let run = |shuffle| {
+        let pairs = synthetic(40, 3);
+        let mut data = NetData::new(NetKind::Perception, &pairs);
+        data.mask_loss_weight = 0.02;
+        data.iou_loss_weight = 0.05;
+        let split = Split {
+            train: (0..32).collect(),
+            val: (32..40).collect(),
+        };
+        let net = small(NetKind::Perception)
+            .init(&cpu_autodiff(), 11)
+            .unwrap();
+        let tc = TrainConfig {
+            epochs: 40,
+            batch_size: 8,
+            learning_rate: 3e-3,
+            val_fraction: 0.0,
+            patience: 0,
+            grad_clip_norm: None,
+            seed: 5,
+            progress: false,
+        };
+        let report = nets::train(&data, net, &split, &tc, shuffle).unwrap();
+        let pred = data.predict(&report.model, &split.val, 8, &cpu());
+        let s = nets::score_predicted(&pred, &pairs, &split.val, nets::CONTACT_DZ_M, 1.0).unwrap();
+        s.iou_mean
+    };
+    let (iou, shuffled) = (run(None), run(Some(9)));
+    eprintln!("perception with the IoU term: held-out mean IoU {iou}, shuffled {shuffled}");
+    assert!(iou > 0.6, "held-out mean IoU {iou}");
+    assert!(
+        shuffled < iou - 0.2,
+        "shuffled targets reach IoU {shuffled} against {iou}: the test cannot fail"
+    );
+}
+
 #[test]
 fn rendering_training_learns_and_fails_on_shuffled_targets() {
     let (held, train) = held_out_ratio(NetKind::Rendering, None);

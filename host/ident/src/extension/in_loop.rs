@@ -481,6 +481,22 @@ impl Prepared<'_> {
                     jtj[(q, p)] = s;
                 }
             }
+            // Bound-constrained steps: a dissipative weight at zero whose gradient points below
+            // zero is held there (its row and column leave the system). Clipping it after an
+            // unconstrained step instead spoils the step of every other parameter: a cause
+            // added at zero weights beside a refined one then never left zero (exactly 0 %
+            // gain for every second cause of the pairs).
+            for (j, &(_, nonneg)) in lp.factor.iter().enumerate() {
+                let p = lay.weights() + j;
+                if nonneg && th[p] <= 0.0 && jtr[p] <= 0.0 {
+                    for q in 0..np {
+                        jtj[(p, q)] = 0.0;
+                        jtj[(q, p)] = 0.0;
+                    }
+                    jtj[(p, p)] = 1.0;
+                    jtr[p] = 0.0;
+                }
+            }
             let mut improved = false;
             for _ in 0..8 {
                 let mut lhs = jtj.clone();

@@ -29,6 +29,13 @@ pub enum Prescribe {
         /// Indentation (-u_z) above which a node is in the patch, m.
         threshold_m: f64,
     },
+    /// All three components on the top nodes indented deeper than `threshold_m`: given a u_z
+    /// field with zero u_x and u_y (the perception output), a patch stuck where it was touched
+    /// (the limit of high friction), where `ContactZ` is the frictionless limit.
+    ContactXyz {
+        /// Indentation (-u_z) above which a node is in the patch, m.
+        threshold_m: f64,
+    },
     /// All three components on every top node (a full FEM surface field: the reactions are then
     /// the FEM's own nodal surface forces).
     All,
@@ -138,6 +145,8 @@ impl<'a> SurfaceForceModel<'a> {
             let dims: &[usize] = match how {
                 Prescribe::ContactZ { threshold_m } if -u[2] > threshold_m => &[2],
                 Prescribe::ContactZ { .. } => &[],
+                Prescribe::ContactXyz { threshold_m } if -u[2] > threshold_m => &[0, 1, 2],
+                Prescribe::ContactXyz { .. } => &[],
                 Prescribe::All => &[0, 1, 2],
             };
             if dims.is_empty() || (0..3).all(|d| self.gel.model.fixed[3 * i + d]) {
@@ -260,6 +269,9 @@ pub struct ForceScores {
     pub fem_max_n: f64,
     /// Patch threshold, m.
     pub threshold_m: f64,
+    /// Whether the patch's x and y were held (stuck) rather than free.
+    #[serde(default)]
+    pub stuck: bool,
     /// Wall time, s.
     pub seconds: f64,
     /// Every sample.
@@ -269,9 +281,11 @@ pub struct ForceScores {
 /// Scores the surface force of the perception output `pred_dz_m` (`[rows, cols]` per sample of
 /// `idx`, m) against the FEM forces of `ds` (the data set `pairs` was built from):
 /// the field goes to the top nodes through `to_mesh`, the patch is the nodes indented over
-/// [`super::CONTACT_DZ_M`], and the gel model gives the force. The same is done with the FEM's
-/// u_z on the image grid and on the nodes (with `floors`; NaN without), so the figure can be
-/// split into its causes.
+/// `threshold_m` ([`super::CONTACT_DZ_M`] by default in the CLI), their u_z prescribed with x
+/// and y free, or with `stuck` x and y held (`Prescribe::ContactXyz`), and the gel model gives
+/// the force. The same is done with the FEM's u_z on the image grid and on the nodes (with
+/// `floors`; NaN without), so the figure can be split into its causes.
+#[allow(clippy::too_many_arguments)]
 pub fn score_force(
     model: &SurfaceForceModel,
     to_mesh: &crate::optics::GridToMesh,
@@ -280,7 +294,14 @@ pub fn score_force(
     pred_dz_m: &[f32],
     idx: &[usize],
     floors: bool,
+    threshold_m: f64,
+    stuck: bool,
 ) -> Result<ForceScores> {
+    if !(threshold_m.is_finite() && threshold_m >= 0.0) {
+        return Err(TactileError::Input(format!(
+            "surface-force patch threshold {threshold_m} m: expected a finite value >= 0"
+        )));
+    }
     let t0 = std::time::Instant::now();
     let n = pairs.pixels();
     if pred_dz_m.len() != idx.len() * n || to_mesh.len() != model.top_nodes() {
@@ -298,8 +319,10 @@ pub fn score_force(
         first.push(acc);
         acc += s.displacement_m.len();
     }
-    let how = Prescribe::ContactZ {
-        threshold_m: super::CONTACT_DZ_M,
+    let how = if stuck {
+        Prescribe::ContactXyz { threshold_m }
+    } else {
+        Prescribe::ContactZ { threshold_m }
     };
     let on_nodes = |field: &[f32]| -> Result<Vec<[f64; 3]>> {
         Ok(to_mesh
@@ -371,7 +394,8 @@ pub fn score_force(
         rmse_fem_field_n: rmse(&|s| s.fem_field_n),
         median_relative_error_predicted: rel.get(rel.len() / 2).copied().unwrap_or(f64::NAN),
         fem_max_n: per_sample.iter().map(|s| s.fem_n).fold(0.0, f64::max),
-        threshold_m: super::CONTACT_DZ_M,
+        threshold_m,
+        stuck,
         seconds: t0.elapsed().as_secs_f64(),
         per_sample,
     })
@@ -485,6 +509,21 @@ mod tests {
                 )
                 .unwrap();
             assert!(none.patch.is_empty() && none.total_eq58_n == 0.0);
+            // All three components held at the homogeneous solution's (lateral stretch a about
+            // the rollers at x = y = 0): the same equilibrium and force. Held at zero lateral
+            // motion (stuck), the top cannot spread and the force is larger.
+            let rest = crate::dataset::TopSurface::from_gel(&gel).rest_m;
+            let homog: Vec<[f64; 3]> = rest
+                .iter()
+                .map(|p| [(a - 1.0) * p[0], (a - 1.0) * p[1], -d])
+                .collect();
+            let xyz = Prescribe::ContactXyz { threshold_m: 1e-6 };
+            let held = model.solve(&homog, xyz).unwrap();
+            assert_eq!(held.patch.len(), model.top_nodes());
+            assert!((held.total_reaction_n - expect).abs() < 1e-5 * expect);
+            let stuck = model.solve(&u, xyz).unwrap();
+            println!("d {d:e}: stuck top {:.6} N", stuck.total_reaction_n);
+            assert!(stuck.total_reaction_n > 1.001 * expect);
         }
         let bad = vec![[0.0, 0.0, f64::NAN]; model.top_nodes()];
         assert!(model.solve(&bad, Prescribe::All).is_err());

@@ -36,6 +36,10 @@ pub const FOURIER_FREQS: usize = 4;
 /// threshold (which sits exactly at dz_norm = 1, dz_max being -30 um).
 pub const MASK_LOGIT_WIDTH: f32 = 0.02;
 
+/// Pixels added to the intersection and the union of the soft contact IoU term, so a sample
+/// without contact whose prediction has none scores 1 and the ratio stays finite.
+pub const SOFT_IOU_EPS: f32 = 1.0;
+
 /// u_z (m) -> the perception network's target: 0 at dz_min, 1 at dz_max (no clipping, so an
 /// undeformed pixel sits slightly above 1).
 pub fn dz_to_target(dz_m: f64) -> f64 {
@@ -175,6 +179,10 @@ pub struct NetData {
     /// Weight of the perception network's contact-mask term (binary cross-entropy of the soft
     /// threshold, see [`MASK_LOGIT_WIDTH`]) beside eq 5.15's MSE; 0 is eq 5.15 alone.
     pub mask_loss_weight: f32,
+    /// Weight of the perception network's soft contact IoU term (1 - soft IoU per sample, the
+    /// soft mask being the sigmoid of the same logit as the mask term, averaged over samples);
+    /// 0 leaves it out. Unlike the pixel-averaged terms it weighs a small contact like a large one.
+    pub iou_loss_weight: f32,
     coords: Vec<f32>,
 }
 
@@ -200,6 +208,7 @@ impl NetData {
                     .map(|&v| f32::from(-f64::from(v) > CONTACT_DZ_M))
                     .collect(),
                 mask_loss_weight: 0.0,
+                iou_loss_weight: 0.0,
                 coords: Vec::new(),
             },
             NetKind::Rendering => NetData {
@@ -226,6 +235,7 @@ impl NetData {
                     })
                     .collect(),
                 mask_loss_weight: 0.0,
+                iou_loss_weight: 0.0,
                 coords: coordinate_channels(p.rows, p.cols),
             },
         }
@@ -299,15 +309,26 @@ impl NetData {
             NetKind::Perception => {
                 let dz = out.narrow(1, 2, 1);
                 let mse = (dz.clone() - target).powi_scalar(2).mean();
+                if self.mask_loss_weight <= 0.0 && self.iou_loss_weight <= 0.0 {
+                    return mse;
+                }
+                let m = self.rows_of(&self.mask, n, target_idx, 1, device);
+                let z = dz.neg().add_scalar(1.0).div_scalar(MASK_LOGIT_WIDTH);
+                let mut loss = mse;
+                if self.iou_loss_weight > 0.0 {
+                    let p = activation::sigmoid(z.clone());
+                    let inter = (p.clone() * m.clone()).sum_dim(3).sum_dim(2);
+                    let union = (p + m.clone()).sum_dim(3).sum_dim(2) - inter.clone();
+                    let iou = inter.add_scalar(SOFT_IOU_EPS) / union.add_scalar(SOFT_IOU_EPS);
+                    let term = iou.neg().add_scalar(1.0).mean();
+                    loss = loss + term.mul_scalar(self.iou_loss_weight);
+                }
                 if self.mask_loss_weight > 0.0 {
                     // BCE with logits z: softplus(z) - y z.
-                    let m = self.rows_of(&self.mask, n, target_idx, 1, device);
-                    let z = dz.neg().add_scalar(1.0).div_scalar(MASK_LOGIT_WIDTH);
                     let bce = (activation::softplus(z.clone(), 1.0) - z * m).mean();
-                    mse + bce.mul_scalar(self.mask_loss_weight)
-                } else {
-                    mse
+                    loss = loss + bce.mul_scalar(self.mask_loss_weight);
                 }
+                loss
             }
             NetKind::Rendering => {
                 let pred = activation::tanh(out);
@@ -414,6 +435,15 @@ pub struct PerceptionSample {
     pub depth_mm: f64,
     /// Contact pixels of the true mask.
     pub true_pixels: usize,
+    /// Contact pixels of the predicted mask.
+    #[serde(default)]
+    pub pred_pixels: usize,
+    /// True contact pixels the prediction misses.
+    #[serde(default)]
+    pub missed_pixels: usize,
+    /// Predicted contact pixels outside the true mask.
+    #[serde(default)]
+    pub extra_pixels: usize,
     /// Contact-mask IoU.
     pub iou: f64,
     /// Centroid error, mm (NaN when the prediction has no contact).
@@ -446,6 +476,10 @@ pub struct PerceptionScores {
     pub rotation_elongated_samples: usize,
     /// RMSE of u_z over all pixels, m.
     pub dz_rmse_m: f64,
+    /// RMSE of u_z over the pixels of the true contact masks, m (the depth the surface force
+    /// integrates; outside the contact the mask terms push the prediction above the surface).
+    #[serde(default)]
+    pub dz_rmse_contact_m: f64,
     /// Images per second of inference (batches of 8).
     pub images_per_s: f64,
     /// Every scored sample.
@@ -563,12 +597,18 @@ pub fn score_predicted(
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut per_sample = Vec::new();
     let (mut se, mut count) = (0.0, 0usize);
+    let (mut se_contact, mut count_contact) = (0.0, 0usize);
     for (k, &i) in idx.iter().enumerate() {
         let truth = &pairs.dz_m[i * n..(i + 1) * n];
         let p = &pred[k * n..(k + 1) * n];
         for (a, b) in truth.iter().zip(p) {
-            se += f64::from(a - b).powi(2);
+            let e = f64::from(a - b).powi(2);
+            se += e;
             count += 1;
+            if -f64::from(*a) > CONTACT_DZ_M {
+                se_contact += e;
+                count_contact += 1;
+            }
         }
         let mt = contact_mask(grid, truth);
         if mt.count() == 0 {
@@ -598,6 +638,19 @@ pub fn score_predicted(
                 .unwrap_or_default(),
             depth_mm: pairs.depth_m[i] * 1e3,
             true_pixels: mt.count(),
+            pred_pixels: mp.count(),
+            missed_pixels: mt
+                .pixels
+                .iter()
+                .zip(&mp.pixels)
+                .filter(|(t, p)| **t && !**p)
+                .count(),
+            extra_pixels: mt
+                .pixels
+                .iter()
+                .zip(&mp.pixels)
+                .filter(|(t, p)| !**t && **p)
+                .count(),
             iou,
             centroid_mm: cen,
             rotation_rad: rot,
@@ -615,6 +668,7 @@ pub fn score_predicted(
         rotation_elongated_samples: rots_el.len(),
         rotation_rad_median_elongated: median(rots_el),
         dz_rmse_m: (se / count.max(1) as f64).sqrt(),
+        dz_rmse_contact_m: (se_contact / count_contact.max(1) as f64).sqrt(),
         images_per_s: ips,
         per_sample,
         pred_threshold_m,
@@ -786,6 +840,25 @@ mod tests {
         let idx = [0, 1];
         let at30 = score_predicted(&pred, &pairs, &idx, CONTACT_DZ_M, 1.0).unwrap();
         assert!(at30.iou_median < 0.95, "{}", at30.iou_median);
+        // The error is 0.2 |u_z|: its RMSE over the true contact pixels, summed directly.
+        let inside: Vec<f64> = dz
+            .iter()
+            .filter(|v| -f64::from(**v) > CONTACT_DZ_M)
+            .map(|v| 0.2 * f64::from(*v))
+            .collect();
+        let rms = (inside.iter().map(|e| e * e).sum::<f64>() / inside.len() as f64).sqrt();
+        assert!(
+            (at30.dz_rmse_contact_m - rms).abs() < 1e-6 * rms,
+            "{} vs {rms}",
+            at30.dz_rmse_contact_m
+        );
+        assert!(at30.dz_rmse_contact_m > at30.dz_rmse_m);
+        // The shallower prediction's mask lies inside the true one: nothing extra, the rest missed.
+        for s in &at30.per_sample {
+            assert_eq!(s.extra_pixels, 0);
+            assert!(s.missed_pixels > 0);
+            assert_eq!(s.pred_pixels + s.missed_pixels, s.true_pixels);
+        }
         let cands: Vec<f64> = (0..=20).map(|k| 10e-6 + 2e-6 * k as f64).collect();
         let (t, iou) = fit_threshold(&pred, &pairs, &idx, &cands).unwrap();
         // 0.8 (200 - 20 d) um > t  <=>  200 - 20 d > t / 0.8: t = 24 um reproduces 30 um.
