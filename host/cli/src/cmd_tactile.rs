@@ -1219,17 +1219,7 @@ fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
             let Some((_, dir)) = folders.iter().find(|(n, _)| n == h) else {
                 continue;
             };
-            let js = dir.join("setup.json");
-            let setup = if js.is_file() {
-                ocm_tactile::setup::Setup::read_json(&js, &digit)?
-            } else {
-                all.iter()
-                    .find(|s| &s.name == h)
-                    .cloned()
-                    .with_context(|| {
-                        format!("{}: no setup.json and no set-up named '{h}'", dir.display())
-                    })?
-            };
+            let setup = ocm_tactile::setup::Setup::beside_fem(dir, h, &digit, &all)?;
             seqs.push((
                 setup,
                 FemSequence::read(dir, gel.num_nodes(), Some(a.step_um * 1e-6))?,

@@ -51,15 +51,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .map(|r| r.join(name))
             .find(|d| d.join("u_001.npy").is_file())
             .ok_or_else(|| format!("no FEM folder named {name}"))?;
-        let js = dir.join("setup.json");
-        let setup: Setup = if js.is_file() {
-            Setup::read_json(&js, &digit)?
-        } else {
-            all.iter()
-                .find(|s| s.name == name)
-                .cloned()
-                .ok_or_else(|| format!("no set-up named {name}"))?
-        };
+        let setup = Setup::beside_fem(&dir, name, &digit, &all)?;
         let fem = FemSequence::read(&dir, n, Some(50e-6))?;
         let deepest = fem.depth_m.iter().copied().fold(0.0, f64::max);
         let indenter = Indenter::from_stl(&setup.stl)?;

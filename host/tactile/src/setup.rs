@@ -143,6 +143,26 @@ impl Setup {
         std::fs::write(path, text).map_err(|e| TactileError::io(path, e))
     }
 
+    /// The set-up of a FEM results folder: its `setup.json` when present, otherwise the one named
+    /// `name` among `known` (the data directory's set-ups).
+    pub fn beside_fem(dir: &Path, name: &str, digit_dir: &Path, known: &[Setup]) -> Result<Setup> {
+        let js = dir.join("setup.json");
+        if js.is_file() {
+            return Setup::read_json(&js, digit_dir);
+        }
+        known
+            .iter()
+            .find(|s| s.name == name)
+            .cloned()
+            .ok_or_else(|| TactileError::Setup {
+                setup: name.to_string(),
+                msg: format!(
+                    "{}: no setup.json and no set-up of that name",
+                    dir.display()
+                ),
+            })
+    }
+
     /// Reads a set-up written by [`Setup::write_json`], resolving its STL in `digit_dir`; a
     /// missing STL or a non-finite placement is an error naming the file.
     pub fn read_json(path: &Path, digit_dir: &Path) -> Result<Setup> {
