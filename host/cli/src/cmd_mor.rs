@@ -14,7 +14,7 @@ use ocm_mor::pod::{PodOptions, Truncation};
 use ocm_mor::rom::ReducedModel;
 use ocm_mor::store::{self, PodRecord, ReducedProbe, RomRecord, Snapshots};
 use ocm_mor::xs::XsProbe;
-use ocm_mor::{full, run};
+use ocm_mor::{full, opinf, run};
 use std::path::PathBuf;
 
 /// Model-order reduction subcommands.
@@ -87,7 +87,9 @@ pub enum MorCommand {
         json: bool,
     },
     /// Builds the Galerkin reduced model on a basis, hyper-reduces it with ECSW (NNLS on element
-    /// contributions of the training snapshots), and scores it on the held-out sequences.
+    /// contributions of the training snapshots), and scores it on the held-out sequences. With
+    /// --method opinf, fits an operator-inference model (a polynomial map of the POD coordinates,
+    /// regularisation chosen by the free-run TCP error on the last training sequences) instead.
     Reduce {
         #[command(flatten)]
         mesh: MeshArgs,
@@ -103,9 +105,16 @@ pub enum MorCommand {
         /// Use every k-th training snapshot for ECSW.
         #[arg(long, default_value_t = 10)]
         every: usize,
-        /// Output folder for ecsw.npy and rom.json (default: the basis folder).
+        /// Output folder for ecsw.npy and rom.json, or opinf.npy and opinf.json (default: the
+        /// basis folder).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// ecsw: Galerkin projection with ECSW hyper-reduction; opinf: operator inference, a
+        /// polynomial map fitted to the training snapshots' POD coordinates (non-intrusive).
+        #[arg(long, value_enum, default_value = "ecsw")]
+        method: MethodArg,
+        #[command(flatten)]
+        opinf: OpInfArgs,
         /// Print a JSON summary.
         #[arg(long)]
         json: bool,
@@ -130,6 +139,11 @@ pub enum MorCommand {
         /// Full-FEM steps re-timed in this run (first held-out sequence; 0 = all of it).
         #[arg(long, default_value_t = 0)]
         full_steps: usize,
+        /// Add an operator-inference row at each rank (method `opinf`).
+        #[arg(long)]
+        with_opinf: bool,
+        #[command(flatten)]
+        opinf: OpInfArgs,
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
@@ -148,6 +162,9 @@ pub enum MorCommand {
         /// Reduced-model folder (basis.npy, pod.json, ecsw.npy, rom.json) for --model reduced.
         #[arg(long, required_if_eq("model", "reduced"))]
         rom: Option<PathBuf>,
+        /// Reduced model in --rom: ecsw (rom.json) or opinf (opinf.json, operator inference).
+        #[arg(long, value_enum, default_value = "ecsw")]
+        method: MethodArg,
         /// Rows (time steps of 0.01 s) in the whole dataset.
         #[arg(long)]
         samples: usize,
@@ -184,6 +201,77 @@ impl MeshArgs {
     fn load(&self) -> anyhow::Result<Bellows> {
         let p = data_path(self.mesh.clone(), self.data.as_deref(), BELLOWS_MESH)?;
         Ok(Bellows::load(&p, BellowsConfig::default())?)
+    }
+}
+
+/// Reduction methods on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MethodArg {
+    /// Galerkin projection with ECSW hyper-reduction.
+    Ecsw,
+    /// Operator inference (fitted polynomial map of the POD coordinates).
+    Opinf,
+}
+
+/// Options of the operator-inference fit.
+#[derive(clap::Args, Debug, Clone)]
+pub struct OpInfArgs {
+    /// opinf: quadratic and position-velocity terms of the first m coordinates.
+    #[arg(long, default_value_t = 2)]
+    quadratic_modes: usize,
+    /// opinf: state lags (q_k, q_{k-1}, ...), at least 2.
+    #[arg(long, default_value_t = 3)]
+    state_lags: usize,
+    /// opinf: input lags (w_{k+1}, w_k, ...), at least 1.
+    #[arg(long, default_value_t = 2)]
+    input_lags: usize,
+    /// opinf: pressure-state and force-state bilinear terms of the first m coordinates.
+    #[arg(long, default_value_t = 16)]
+    bilinear_modes: usize,
+    /// opinf: regularisations tried, each LINEAR or LINEAR:NONLINEAR (relative to unit-RMS
+    /// features); the one with the smallest free-run TCP error on the validation sequences wins.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "1e-6:1e-4,1e-5:1e-3,1e-5:3e-3,3e-5:1e-3,3e-5:1e-2,1e-4:1e-2,3e-5:3e-2"
+    )]
+    lambdas: Vec<String>,
+    /// opinf: the last training sequences that choose the regularisation.
+    #[arg(long, default_value_t = 8)]
+    validation: usize,
+    /// opinf: more snapshot folders of the same model (other seeds) to train on.
+    #[arg(long, value_delimiter = ',')]
+    extra_snapshots: Vec<PathBuf>,
+}
+
+impl OpInfArgs {
+    fn options(&self) -> anyhow::Result<opinf::FitOptions> {
+        Ok(opinf::FitOptions {
+            terms: opinf::OpInfTerms {
+                quadratic_modes: self.quadratic_modes,
+                pressure_bilinear: true,
+                bilinear_modes: self.bilinear_modes,
+                force_bilinear: true,
+                input_quadratic: true,
+                state_lags: self.state_lags,
+                input_lags: self.input_lags,
+                implicit: false,
+                velocity_bilinear: true,
+            },
+            lambdas: self
+                .lambdas
+                .iter()
+                .map(|t| opinf::Regularisation::parse(t))
+                .collect::<ocm_mor::Result<_>>()?,
+            validation_sequences: self.validation,
+        })
+    }
+
+    fn extra(&self, hash: &str) -> anyhow::Result<Vec<Snapshots>> {
+        self.extra_snapshots
+            .iter()
+            .map(|d| Ok(store::load_snapshots(d, hash)?))
+            .collect()
     }
 }
 
@@ -430,12 +518,52 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
             tolerance,
             every,
             out,
+            method,
+            opinf: oargs,
             json,
         } => {
             let b = mesh.load()?;
             let hash = store::model_hash(&b);
             let s = store::load_snapshots(&snapshots, &hash)?;
             let (v, _) = store::load_basis(&basis, &hash, 3 * b.model.num_nodes())?;
+            if method == MethodArg::Opinf {
+                let extra = oargs.extra(&hash)?;
+                let refs: Vec<&Snapshots> = extra.iter().collect();
+                let probe = XsProbe::of_bellows(&b);
+                let t0 = std::time::Instant::now();
+                let (m, rec) = opinf::fit_snapshots(&s, &refs, &v, &probe, &oargs.options()?)?;
+                let fit_secs = t0.elapsed().as_secs_f64();
+                let out = out.unwrap_or(basis);
+                opinf::save(&out, &m, &rec)?;
+                let rp = ReducedProbe::of_basis(probe, &v);
+                let held = s.rec.sequences..s.rec.sequences + s.rec.held_out;
+                if held.is_empty() {
+                    bail!("no held-out sequences in the snapshot folder (use --held-out)");
+                }
+                let (err, times) = opinf::snapshot_tcp_rmse_mm(&m, &rp, &s, held)?;
+                let sps = run::median(&times);
+                let speedup = s.rec.seconds_per_step / sps;
+                if json {
+                    println!(
+                        "{}",
+                        serde_json::json!({ "opinf": rec, "fit_seconds": fit_secs, "held_out_tcp_rmse_mm": err,
+                            "reduced_seconds_per_step": sps, "full_seconds_per_step": s.rec.seconds_per_step, "speedup": speedup })
+                    );
+                } else {
+                    println!(
+                        "operator inference, rank {}, {} features, regularisation {}:{} ({fit_secs:.1} s, spectral radius {:.4}); held-out TCP RMSE {err:.3} mm, {:.2} us/step vs full {:.1} ms/step (snapshot run): {speedup:.0}x -> {}",
+                        rec.rank,
+                        rec.features,
+                        rec.lambda.linear,
+                        rec.lambda.nonlinear,
+                        rec.spectral_radius,
+                        sps * 1e6,
+                        s.rec.seconds_per_step * 1e3,
+                        out.display()
+                    );
+                }
+                return Ok(());
+            }
             let gal = galerkin(&b, v.clone())?;
             let t0 = std::time::Instant::now();
             let ecsw = gal.hyper_reduce(&s.training_q(&v, every), tolerance)?;
@@ -480,6 +608,8 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
             tolerances,
             every,
             full_steps,
+            with_opinf,
+            opinf: oargs,
             out,
             json,
         } => {
@@ -487,8 +617,13 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
             let hash = store::model_hash(&b);
             let s = store::load_snapshots(&snapshots, &hash)?;
             std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+            let (fit, extra) = if with_opinf {
+                (Some(oargs.options()?), oargs.extra(&hash)?)
+            } else {
+                (None, vec![])
+            };
             let pb = bar(
-                1 + ranks.len() * tolerances.len(),
+                1 + ranks.len() * (tolerances.len() + usize::from(with_opinf)),
                 "full timing, rank x tolerance",
             );
             let c = ocm_mor::curve::sweep(
@@ -499,6 +634,8 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
                     tolerances: tolerances.clone(),
                     every,
                     full_timing_steps: full_steps,
+                    opinf: fit,
+                    opinf_extra: extra,
                 },
                 &mut |line| {
                     pb.println(line);
@@ -510,7 +647,7 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
             let csv_path = out.join("curve.csv");
             std::fs::write(&csv_path, &csv)
                 .with_context(|| format!("writing {}", csv_path.display()))?;
-            let series = tolerances
+            let mut series: Vec<Series> = tolerances
                 .iter()
                 .map(|&tol| Series {
                     label: if tol > 0.0 {
@@ -521,16 +658,30 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
                     points: c
                         .points
                         .iter()
-                        .filter(|p| p.ecsw_tolerance == tol)
-                        .map(|p| (p.speedup, p.tcp_rmse_mm))
+                        .filter(|p| p.method != "opinf" && p.ecsw_tolerance == tol)
+                        .map(|p| (p.speedup.log10(), p.tcp_rmse_mm))
                         .filter(|(x, y)| x.is_finite() && y.is_finite())
                         .collect(),
                     dots: false,
                 })
                 .collect();
+            if with_opinf {
+                series.push(Series {
+                    label: "operator inference".into(),
+                    points: c
+                        .points
+                        .iter()
+                        .filter(|p| p.method == "opinf")
+                        .map(|p| (p.speedup.log10(), p.tcp_rmse_mm))
+                        .filter(|(x, y)| x.is_finite() && y.is_finite())
+                        .collect(),
+                    // One point per rank: a line through them would hide a single one.
+                    dots: true,
+                });
+            }
             Chart {
                 title: "Reduced bellows model: held-out TCP error against speed-up per step",
-                x_label: "speed-up per implicit step vs full FEM (median, x)",
+                x_label: "log10 of the speed-up per implicit step vs full FEM (median)",
                 y_label: "held-out TCP RMSE (mm)",
                 series,
                 equal_axes: false,
@@ -552,6 +703,7 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
             mesh,
             model,
             rom,
+            method,
             samples,
             sequence_steps,
             shard,
@@ -588,6 +740,37 @@ pub fn run(cmd: MorCommand) -> anyhow::Result<()> {
                         &mut |inputs| {
                             Ok(full::simulate(&b, inputs, drive_cfg.dt_s, false, |_| {})?.xs)
                         },
+                        &mut progress,
+                    )?
+                }
+                ModelArg::Reduced if method == MethodArg::Opinf => {
+                    let dir = rom.context("--rom DIR is required for --model reduced")?;
+                    let (v, _) = store::load_basis(&dir, &hash, 3 * b.model.num_nodes())?;
+                    let (m, rec) = opinf::load(&dir, &v)?;
+                    let rp = ReducedProbe::of_basis(probe, &v);
+                    if (rec.dt_s - drive_cfg.dt_s).abs() > 1e-12 {
+                        bail!(
+                            "{}: fitted at dt {} s, the dataset steps {} s",
+                            dir.join("opinf.json").display(),
+                            rec.dt_s,
+                            drive_cfg.dt_s
+                        );
+                    }
+                    let spec = DatasetSpec {
+                        model: ModelKind::ReducedOpinf,
+                        model_hash: hash,
+                        basis_hash: Some(opinf::model_hash(&rec)),
+                        samples,
+                        sequence_steps,
+                        seed,
+                        drive: drive_cfg,
+                    };
+                    dataset::write_shard(
+                        &out,
+                        &spec,
+                        i,
+                        n,
+                        &mut |inputs| Ok(m.run(&rp, inputs)?.xs),
                         &mut progress,
                     )?
                 }

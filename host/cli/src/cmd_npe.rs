@@ -66,6 +66,10 @@ pub enum NpeCommand {
         /// Weight of the contact head's cross-entropy.
         #[arg(long, default_value_t = 1.0)]
         lambda_contact: f64,
+        /// The gap input: each node's initial state also gets the x-y distance to the nearest
+        /// contact point (within 1 mm) and that point's height above the node.
+        #[arg(long)]
+        node_gap: bool,
         /// Fine-tune this checkpoint of `ocm npe train` (same split: same --seed, --test-setups,
         /// --val-setups and dataset) instead of starting from random weights; its architecture
         /// is kept, the loss weights and the contact head are these options'.
@@ -228,6 +232,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             contact_prior,
             contact_head,
             lambda_contact,
+            node_gap,
             init_from,
             no_geometry,
             no_force,
@@ -251,6 +256,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
                 contact_prior,
                 contact_head,
                 lambda_contact,
+                node_gap,
                 init_from,
                 test_setups,
                 val_setups,

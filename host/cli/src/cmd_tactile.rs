@@ -1101,15 +1101,161 @@ pub struct ReduceArgs {
     #[arg(long)]
     enrich: bool,
     /// With --enrich: the footprint loads whose responses become modes, comma-separated, out of
-    /// foot, rim, ring2, out, out_rim, radial, tilt_x, tilt_y, skirt.
+    /// foot, rim, ring2, out, out_rim, radial, tilt_x, tilt_y, skirt; nl_<load> adds the
+    /// second-order field of that load's response.
     #[arg(long, value_delimiter = ',', default_value = "foot,rim")]
     enrich_loads: Vec<String>,
+    /// Replace the rest stiffness' K_r q by the gel's Neo-Hookean internal force, hyper-reduced
+    /// by ECSW weights fitted on the FEM frames of the set-ups the basis was built from (each
+    /// projected on its own placement's basis).
+    #[arg(long)]
+    nonlinear: bool,
+    /// With --nonlinear: relative tolerance of the ECSW fit.
+    #[arg(long, default_value_t = 0.02)]
+    ecsw_tol: f64,
+    /// With --nonlinear: FEM frames per training set-up (evenly spaced, the deepest included).
+    #[arg(long, default_value_t = 3)]
+    ecsw_frames: usize,
+    /// With --nonlinear: read the ECSW weights (NPY, rows element, weight) instead of fitting
+    /// them; a fit writes <out>/ecsw_r<rank>.npy.
+    #[arg(long)]
+    ecsw: Option<PathBuf>,
+    /// Linearisation passes per reduced frame (default: the reduced options').
+    #[arg(long)]
+    passes: Option<usize>,
     /// Timed repeats of each held-out sequence.
     #[arg(long, default_value_t = 5)]
     repeats: usize,
     /// Print JSON.
     #[arg(long)]
     json: bool,
+}
+
+/// ECSW weights of the nonlinear reduced force for the basis `m`: read from --ecsw, or fitted
+/// on --ecsw-frames FEM frames of every set-up the basis was built from (those found under the
+/// --fem folders), each projected on its own placement's basis (with `enrich`, its footprint
+/// modes), and written to <out>/ecsw_r<rank>.npy. Returns the sampled gel and a JSON summary.
+fn reduce_ecsw(
+    a: &ReduceArgs,
+    gel: &Gel,
+    digit: &std::path::Path,
+    all: &[ocm_tactile::setup::Setup],
+    folders: &[(String, PathBuf)],
+    m: &ocm_tactile::reduced::ReducedModel,
+    enrich: Option<ocm_tactile::reduced::Enrichment>,
+) -> anyhow::Result<(ocm_tactile::hyper::NonlinearGel, serde_json::Value)> {
+    use ocm_tactile::hyper::{EcswTraining, NonlinearGel, fit_ecsw};
+    use ocm_tactile::reduced::{FemSequence, placement_model};
+    let t0 = std::time::Instant::now();
+    if let Some(path) = &a.ecsw {
+        let w = ocm_fem::npy::read_f64_2d(path)?;
+        if w.cols != 2 {
+            bail!(
+                "{}: {} columns, expected 2 (element, weight)",
+                path.display(),
+                w.cols
+            );
+        }
+        let mut pairs = Vec::with_capacity(w.rows);
+        for (k, row) in w.data.chunks(2).enumerate() {
+            if !(row[0] >= 0.0 && row[0].fract() == 0.0) {
+                bail!(
+                    "{} row {k}: element {} is not an index",
+                    path.display(),
+                    row[0]
+                );
+            }
+            pairs.push((row[0] as usize, row[1]));
+        }
+        let nl = NonlinearGel::new(gel, &pairs)
+            .with_context(|| format!("ECSW weights {}", path.display()))?;
+        let info = serde_json::json!({"ecsw": path, "elements": nl.len()});
+        return Ok((nl, info));
+    }
+    if a.ecsw_frames == 0 {
+        bail!("--ecsw-frames must be at least 1");
+    }
+    let train: Vec<&(String, PathBuf)> = folders
+        .iter()
+        .filter(|(n, _)| m.info.sources.contains(n))
+        .collect();
+    if train.is_empty() {
+        bail!("--nonlinear: none of the basis' set-ups is under the --fem folders");
+    }
+    let pb = bar(train.len(), "ECSW fields");
+    let mut models = Vec::new();
+    let mut fields = Vec::new();
+    for (name, dir) in &train {
+        let setup = ocm_tactile::setup::Setup::beside_fem(dir, name, digit, all)?;
+        let seq = FemSequence::read(dir, gel.num_nodes(), Some(a.step_um * 1e-6))?;
+        let n = seq.displacement.len();
+        if n == 0 {
+            pb.inc(1);
+            continue;
+        }
+        let k = a.ecsw_frames.min(n);
+        let pick: Vec<usize> = (1..=k).map(|j| (j * n).div_ceil(k) - 1).collect();
+        let model = match enrich {
+            Some(e) => {
+                let deepest = seq.depth_m.iter().copied().fold(0.0, f64::max);
+                let ind = Indenter::from_stl(&setup.stl)?;
+                let approach =
+                    ocm_tactile::indent::Approach::new(name, gel, &ind, setup.placement)?;
+                placement_model(m, e, gel, &ind, &approach, deepest)?
+            }
+            None => m.clone(),
+        };
+        models.push(model);
+        fields.push(
+            pick.iter()
+                .map(|&j| seq.displacement[j].clone())
+                .collect::<Vec<_>>(),
+        );
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    let training: Vec<EcswTraining> = models
+        .iter()
+        .zip(&fields)
+        .map(|(model, f)| EcswTraining {
+            model,
+            fields: f.iter().map(|u| u.as_slice()).collect(),
+        })
+        .collect();
+    let candidates = NonlinearGel::all_elements(gel)?;
+    let fit = fit_ecsw(&candidates, &training, a.ecsw_tol)?;
+    let nl = NonlinearGel::new(gel, &fit.weights)?;
+    let path = a.out.join(format!("ecsw_r{}.npy", m.rank()));
+    let flat: Vec<f64> = fit
+        .weights
+        .iter()
+        .flat_map(|&(e, w)| [e as f64, w])
+        .collect();
+    ocm_fem::npy::write_f64_2d_path(&path, &flat, fit.weights.len(), 2)?;
+    let info = serde_json::json!({
+        "ecsw": path,
+        "elements": nl.len(),
+        "candidates": fit.candidates,
+        "relative_residual": fit.relative_residual,
+        "tolerance": a.ecsw_tol,
+        "training_set_ups": training.len(),
+        "training_fields": fit.fields,
+        "skipped_fields": fit.skipped,
+        "rows": fit.rows,
+        "fit_seconds": t0.elapsed().as_secs_f64(),
+    });
+    if !a.json {
+        println!(
+            "ECSW: {} of {} elements, residual {:.2e} on {} fields of {} set-ups ({:.0} s)",
+            nl.len(),
+            fit.candidates,
+            fit.relative_residual,
+            fit.fields,
+            training.len(),
+            t0.elapsed().as_secs_f64()
+        );
+    }
+    Ok((nl, info))
 }
 
 /// Set-up folders (holding u_001.npy) under the given FEM roots, by name.
@@ -1242,11 +1388,20 @@ fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
             let mut opts = ReducedOptions::for_modulus(gel.material.young_pa);
             opts.normal_penalty_pa_m *= a.penalty_scale;
             opts.max_updates = a.updates;
+            if let Some(p) = a.passes {
+                opts.max_passes = p;
+            }
+            let ecsw = if a.nonlinear {
+                Some(pool.install(|| reduce_ecsw(&a, &gel, &digit, &all, &folders, &m, enrich))?)
+            } else {
+                None
+            };
+            let nonlinear = ecsw.as_ref().map(|(nl, _)| nl);
             let mut scores = Vec::new();
             for (setup, seq) in &seqs {
-                scores.push(
-                    pool.install(|| score_sequence(&m, &gel, setup, seq, opts, a.repeats, enrich))?,
-                );
+                scores.push(pool.install(|| {
+                    score_sequence(&m, &gel, setup, seq, opts, a.repeats, enrich, nonlinear)
+                })?);
             }
             // Frames per second of each repeat over all sequences together; the median repeat.
             let frames: usize = scores.iter().map(|s| s.frames).sum();
@@ -1265,6 +1420,7 @@ fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
                 "rank": r,
                 "enriched": a.enrich,
                 "enrich_loads": if a.enrich { loads.clone() } else { Vec::new() },
+                "nonlinear": ecsw.as_ref().map(|(_, info)| info.clone()),
                 "frames": frames,
                 "frames_per_s_median": median(&fps),
                 "frames_per_s": fps,

@@ -64,6 +64,11 @@ pub struct TrainNetArgs {
     /// ones; 0 leaves it out.
     #[arg(long, default_value_t = 0.0)]
     pub iou_loss: f32,
+    /// Perception: weight (1/N^2) of the surface-force term: the squared force, in N, of the
+    /// depth error through the gel's linear top-face compliance on each target's 30 um patch
+    /// (`nets::force::LinearForceMap`); 0 leaves it out.
+    #[arg(long, default_value_t = 0.0)]
+    pub force_loss: f32,
     /// Also train on the seen states with the surface mirrored across the image rows, columns
     /// and both, each rendered anew (4 x the training samples; validation and held-out
     /// samples stay unmirrored).
@@ -105,6 +110,11 @@ pub struct TrainNetArgs {
     /// With --force: score every K-th held-out sample only (the solves take seconds each).
     #[arg(long, requires = "force", default_value_t = 1)]
     pub force_every: usize,
+    /// With --score-only on a perception checkpoint: the surface force of every held-out
+    /// sample through the gel's linear top-face compliance (seconds; the quantity the
+    /// `--force-loss` term trains), written to `perception_force_linear.json`.
+    #[arg(long, requires = "score_only")]
+    pub force_linear: bool,
     /// With --score-only on a perception checkpoint: choose the indentation threshold of the
     /// predicted contact mask (10 to 100 um in 2.5 um steps) by the median IoU on the
     /// validation samples, and score the held-out ones at it (the true masks stay at 30 um).
@@ -141,6 +151,15 @@ pub struct PerceiveArgs {
     /// are scored.
     #[arg(long, conflicts_with = "uncolour")]
     pub recolour_fem: Option<PathBuf>,
+    /// With --real: multiply the real change by this gain before the network (the calibrating
+    /// sensor's change is stronger than the real one's); choose it on the even frames
+    /// (`even_frames` in the summary), the odd ones are the score.
+    #[arg(long, conflicts_with_all = ["uncolour", "recolour_fem"])]
+    pub gain: Option<f64>,
+    /// With --real: shift the predicted masks in the camera image by the mean offset of their
+    /// centroids from the measured ones over the even frames (fitted there, scored on the odd).
+    #[arg(long, requires = "real")]
+    pub shift_fit: bool,
     /// With --real: keep the real frames' brightness drift (by default each channel's median
     /// change over the camera's view is subtracted).
     #[arg(long)]
@@ -185,6 +204,31 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
     let mut data = NetData::new(kind, &pairs);
     data.mask_loss_weight = a.mask_loss;
     data.iou_loss_weight = a.iou_loss;
+    if a.force_loss > 0.0 {
+        anyhow::ensure!(
+            matches!(kind, NetKind::Perception),
+            "--force-loss is for the perception network"
+        );
+        let t = std::time::Instant::now();
+        let (lin, to_mesh) = linear_force_map(&gel, &pairs, a.scale)?;
+        let n = pairs.pixels();
+        let mut w = Vec::with_capacity(pairs.len() * n);
+        for i in 0..pairs.len() {
+            w.extend(lin.pixel_weights(
+                &to_mesh,
+                &pairs.dz_m[i * n..(i + 1) * n],
+                nets::CONTACT_DZ_M,
+            )?);
+        }
+        data.set_force_loss(a.force_loss, w)?;
+        if !a.json {
+            println!(
+                "surface-force term: linear top-face compliance and the weights of {} samples in {:.1} s",
+                pairs.len(),
+                t.elapsed().as_secs_f64()
+            );
+        }
+    }
     let seen = pairs.samples_where_unseen(false);
     let held = pairs.samples_where_unseen(true);
     anyhow::ensure!(
@@ -246,7 +290,8 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
     let meta = serde_json::json!({
         "seed": a.seed,
         "mask_loss": a.mask_loss,
-        "iou_loss": a.iou_loss,
+    "iou_loss": a.iou_loss,
+        "force_loss": a.force_loss,
         "mirror": a.mirror,
         "init_from": a.init_from.as_ref().map(|p| p.display().to_string()),
         "optics": a.optics.as_ref().map(|p| p.display().to_string()),
@@ -319,7 +364,8 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
         "image": [pairs.rows, pairs.cols],
         "scale": a.scale,
         "mask_loss": a.mask_loss,
-        "iou_loss": a.iou_loss,
+    "iou_loss": a.iou_loss,
+        "force_loss": a.force_loss,
         "mirror": a.mirror,
         "init_from": a.init_from.as_ref().map(|p| p.display().to_string()),
         "optics": a.optics.as_ref().map(|p| p.display().to_string()),
@@ -366,6 +412,19 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The gel's linear top-face force map and the resampler from the pairs' image grid to its top
+/// nodes.
+fn linear_force_map(
+    gel: &Gel,
+    pairs: &pairs::Pairs,
+    scale: usize,
+) -> anyhow::Result<(ocm_tactile::nets::force::LinearForceMap, GridToMesh)> {
+    let (map, _, _) = pairs::image_map(gel, scale);
+    let top = TopSurface::from_gel(gel);
+    let to_mesh = GridToMesh::new(&top.rest_m, pairs.rows, pairs.cols, &map)?;
+    Ok((ocm_tactile::nets::force::LinearForceMap::new(gel)?, to_mesh))
+}
+
 /// `--score-only`: the held-out and validation scores of a trained checkpoint (and with
 /// `--force` the surface force of the held-out samples).
 #[allow(clippy::too_many_arguments)]
@@ -392,6 +451,7 @@ fn score_only(
         pairs.rows
     );
     let mut force = serde_json::Value::Null;
+    let mut force_linear = serde_json::Value::Null;
     let (h, v) = match kind {
         NetKind::Perception => {
             let (mut h, pred) = nets::score_perception(&net, data, pairs, held, &dev)?;
@@ -401,6 +461,47 @@ fn score_only(
                 let (t, _) = nets::fit_threshold(&vpred, pairs, val, &candidates)?;
                 h = nets::score_predicted(&pred, pairs, held, t, h.images_per_s)?;
                 vs = nets::score_predicted(&vpred, pairs, val, t, vs.images_per_s)?;
+            }
+            if a.force_linear {
+                let (lin, to_mesh) = linear_force_map(gel, pairs, a.scale)?;
+                let f = ocm_tactile::nets::force::score_force_linear(
+                    &lin,
+                    &to_mesh,
+                    pairs,
+                    ds,
+                    &pred,
+                    held,
+                    nets::CONTACT_DZ_M,
+                )?;
+                std::fs::create_dir_all(&a.out)
+                    .with_context(|| format!("creating {}", a.out.display()))?;
+                std::fs::write(
+                    a.out.join("perception_force_linear.json"),
+                    serde_json::to_string_pretty(&f)?,
+                )?;
+                // The validation samples (seen set-ups) beside them: whether a force error is
+                // one of unseen shapes or of the network's depth in general.
+                let fv = ocm_tactile::nets::force::score_force_linear(
+                    &lin,
+                    &to_mesh,
+                    pairs,
+                    ds,
+                    &vpred,
+                    val,
+                    nets::CONTACT_DZ_M,
+                )?;
+                std::fs::write(
+                    a.out.join("perception_force_linear_validation.json"),
+                    serde_json::to_string_pretty(&fv)?,
+                )?;
+                let mut brief = serde_json::to_value(&f)?;
+                let mut vbrief = serde_json::to_value(&fv)?;
+                for b in [&mut brief, &mut vbrief] {
+                    if let Some(o) = b.as_object_mut() {
+                        o.remove("per_sample");
+                    }
+                }
+                force_linear = serde_json::json!({"held_out": brief, "validation": vbrief});
             }
             if a.force {
                 use ocm_tactile::nets::force::{SurfaceForceModel, score_force};
@@ -456,6 +557,7 @@ fn score_only(
         "held_out": h,
         "validation": v,
         "surface_force": force,
+        "surface_force_linear": force_linear,
     });
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     std::fs::write(
@@ -497,12 +599,22 @@ fn perceive_real(
                 gel, &fields, &frames, &fitted, &renderer, &even,
             )?)
         }
-        None => None,
+        None => match a.gain {
+            Some(g) => {
+                anyhow::ensure!(
+                    g.is_finite() && g > 0.0,
+                    "--gain {g}: expected a finite value > 0"
+                );
+                Some([[g, 0.0, 0.0], [0.0, g, 0.0], [0.0, 0.0, g]])
+            }
+            None => None,
+        },
     };
     let opts = RealOptions {
         uncolour: a.uncolour,
         recolour,
         remove_drift: !a.keep_drift,
+        shift_fit: a.shift_fit,
         ..RealOptions::default()
     };
     let t = std::time::Instant::now();
@@ -516,22 +628,23 @@ fn perceive_real(
         &cpu(),
     )?;
     let seconds = t.elapsed().as_secs_f64();
-    let med = |f: &dyn Fn(&real_frames::RealFrameScore) -> f64, odd: bool| {
+    // parity: None for every frame, Some(1) for the odd ones, Some(0) for the even ones.
+    let med = |f: &dyn Fn(&real_frames::RealFrameScore) -> f64, parity: Option<usize>| {
         let v: Vec<f64> = scores
             .iter()
-            .filter(|s| !odd || s.frame % 2 == 1)
+            .filter(|s| parity.is_none_or(|p| s.frame % 2 == p))
             .map(f)
             .filter(|x| !x.is_nan())
             .collect();
         ocm_mor::run::median(&v)
     };
-    let summary = |odd: bool| {
+    let summary = |parity: Option<usize>| {
         serde_json::json!({
-            "frames": scores.iter().filter(|s| !odd || s.frame % 2 == 1).count(),
-            "iou_median": med(&|s| s.iou, odd),
-            "centroid_mm_median": med(&|s| s.centroid_mm, odd),
-            "rotation_rad_median": med(&|s| s.rotation_rad, odd),
-            "rotation_rad_median_elongated": med(&|s| if s.real_elongation >= nets::ROTATION_MIN_ELONGATION { s.rotation_rad } else { f64::NAN }, odd),
+            "frames": scores.iter().filter(|s| parity.is_none_or(|p| s.frame % 2 == p)).count(),
+            "iou_median": med(&|s| s.iou, parity),
+            "centroid_mm_median": med(&|s| s.centroid_mm, parity),
+            "rotation_rad_median": med(&|s| s.rotation_rad, parity),
+            "rotation_rad_median_elongated": med(&|s| if s.real_elongation >= nets::ROTATION_MIN_ELONGATION { s.rotation_rad } else { f64::NAN }, parity),
         })
     };
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
@@ -559,8 +672,11 @@ fn perceive_real(
         "recolour": recolour,
         "remove_drift": !a.keep_drift,
         "image": [cfg.rows, cfg.cols],
-        "all_frames": summary(false),
-        "odd_frames": summary(true),
+        "gain": a.gain,
+        "shift_fit": a.shift_fit,
+        "all_frames": summary(None),
+        "odd_frames": summary(Some(1)),
+        "even_frames": summary(Some(0)),
         "seconds": seconds,
         "images": images,
         "per_frame": scores,

@@ -9,7 +9,8 @@
 //!
 //! A held-out Newey-West t statistic of the squared-error reduction is reported as evidence.
 //!
-//! The cause with the best (most negative) `dBIC` among those passing all three is named;
+//! The cause with the best (most negative) `dBIC` among those passing all three is named
+//! (or a passing one whose held-out RMSE is lower by at least `min_extra_gain_pct`);
 //! further causes are added greedily while the combined extension passes the same three tests
 //! against the current one and gains at least `min_extra_gain_pct` more on held-out data, and
 //! does the same against the most flexible variant of the first cause (friction: with
@@ -27,7 +28,7 @@ use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
 use ocm_shared::params::ParamPreset;
 
-use crate::baseline::SeriesModel;
+use crate::baseline::{Baseline, SeriesModel};
 use crate::cause::Cause;
 use crate::direction::{DirectionTest, direction_tests};
 use crate::extension::{Prepared, SetFit, channel_scale};
@@ -93,6 +94,23 @@ pub struct Candidate {
     /// True when its fit was ill-conditioned (cancelling huge terms, or not finite): then it is
     /// never accepted, whatever its scores.
     pub ill_conditioned: bool,
+}
+
+/// One line of evidence per candidate, `cause gain%/score` with `+` where accepted, for logs
+/// that show why a cause was or was not named.
+pub fn evidence(cs: &[Candidate]) -> String {
+    cs.iter()
+        .map(|c| {
+            format!(
+                "{} {:.1}%/{:.0}{}",
+                c.cause,
+                c.gain_pct,
+                c.score,
+                if c.accepted { "+" } else { "" }
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Pooled held-out RMSE of predictions.
@@ -252,6 +270,27 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
         .enumerate()
         .filter(|(_, c)| c.accepted)
         .max_by(|a, b| a.1.score.total_cmp(&b.1.score));
+    // The training criterion picks the first cause, unless another passing candidate is
+    // decisively better on held-out rows: its held-out RMSE at least `min_extra_gain_pct`
+    // below the criterion's choice (the margin a further cause must earn). Two non-nested
+    // extensions can fit the training rows equally well (a one-mass LuGre friction: stop
+    // operators 0.6 % better on training RSS, a BIC lead of 33 from 1400 autocorrelated
+    // residuals) while one of them generalises far better (friction 86 % against 79 % held
+    // out): the training lead is then within what the residuals' autocorrelation inflates.
+    // Only where the extensions are refined in the loop (a state-space baseline): there the
+    // fits are local optima of a rough cost. On the static baselines (exact least squares) it
+    // turned an axial hysteresis+offset mixture into `gain`, so it is left out there.
+    let in_loop = matches!(&prep.baseline, Baseline::StateSpace(ss) if ss.order() > 0);
+    let best = best.map(|(bi, b)| {
+        candidates
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| {
+                in_loop && c.accepted && c.rmse <= (1.0 - cfg.min_extra_gain_pct / 100.0) * b.rmse
+            })
+            .min_by(|a, b| a.1.rmse.total_cmp(&b.1.rmse))
+            .unwrap_or((bi, b))
+    });
     let direction = direction_tests(prep);
     let Some((mut bi, _)) = best else {
         return Selection {
@@ -376,7 +415,7 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
     // of the others (a cause added later can make an earlier one redundant); the weakest
     // failing one is dropped until all pass.
     while causes.len() > 1 {
-        let mut weakest: Option<(f64, usize, SetFit)> = None;
+        let mut failing: Vec<(f64, usize, SetFit)> = Vec::new();
         for i in 0..causes.len() {
             if pinned(causes[i]) {
                 continue;
@@ -386,10 +425,29 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
             let f = prep.fit_set(&rest);
             let s = score(prep, &f, &current, cfg, m, causes[i]);
             let earns = s.accepted && s.gain_pct >= cfg.min_extra_gain_pct;
-            if !earns && weakest.as_ref().is_none_or(|w| s.score < w.0) {
-                weakest = Some((s.score, i, f));
+            if !earns {
+                failing.push((s.score, i, f));
             }
         }
+        // the weakest is dropped, unless dropping another failing cause leaves a set that is
+        // decisively better on held-out rows (the first cause's rule, above)
+        let weakest = failing
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.0.total_cmp(&b.1.0))
+            .map(|(w, x)| {
+                let r_weak = heldout_rmse(prep, &x.2.pred);
+                failing
+                    .iter()
+                    .enumerate()
+                    .map(|(j, y)| (j, heldout_rmse(prep, &y.2.pred)))
+                    .filter(|(_, r)| {
+                        in_loop && *r <= (1.0 - cfg.min_extra_gain_pct / 100.0) * r_weak
+                    })
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .map_or(w, |(j, _)| j)
+            })
+            .map(|j| failing.swap_remove(j));
         match weakest {
             Some((_, i, f)) => {
                 causes.remove(i);

@@ -80,6 +80,15 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
                                 r.gain_pct,
                                 g.details
                             );
+                            if !ok {
+                                // why: every candidate's held-out gain / score / acceptance,
+                                // alone and as additions to the named set
+                                eprintln!(
+                                    "  singles: {}\n  additions: {}",
+                                    ocm_ident::select::evidence(&r.candidates),
+                                    ocm_ident::select::evidence(&r.additions)
+                                );
+                            }
                             (effect, ok)
                         })
                         .collect::<Vec<_>>()
@@ -103,10 +112,10 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
         }
     }
     eprintln!("dynamic battery: {correct} / {total} correct, {false_alarms} false alarms");
-    // regression bounds of the measured figures (with the chamber, 3 seeds: 24 of 27, no false
-    // alarm on 9 clean records; the oscillators on 10 seeds before this round's selection
-    // fixes: 56, 53 and 59 of 60 from seeds 1000, 2000, 3000); the 95 % is not
-    // reached, see the README
+    // regression bounds of the measured figures (converged refinements, 3 seeds: 27 of 27
+    // on seeds 1000-1002, which the fixes were made on, 23 of 27 on fresh seeds 1003-1005;
+    // no false alarm on 9 clean records each); the 95 % holds only on the first, see
+    // the README
     assert!(total > 0);
     assert_eq!(false_alarms, 0, "{false_alarms} false alarms");
     assert!(correct * 100 >= 80 * total, "{correct} / {total}");
@@ -175,24 +184,10 @@ fn dynamic_pairs_name_both_effects() {
                             );
                             // the evidence per candidate, to see why a pair is missed:
                             // cause gain/score/accepted, singles then additions
-                            let show = |cs: &[ocm_ident::select::Candidate]| {
-                                cs.iter()
-                                    .map(|c| {
-                                        format!(
-                                            "{} {:.1}%/{:.0}{}",
-                                            c.cause,
-                                            c.gain_pct,
-                                            c.score,
-                                            if c.accepted { "+" } else { "" }
-                                        )
-                                    })
-                                    .collect::<Vec<_>>()
-                                    .join(", ")
-                            };
                             eprintln!(
                                 "  singles: {}\n  additions: {}",
-                                show(&id.report.candidates),
-                                show(&id.report.additions)
+                                ocm_ident::select::evidence(&id.report.candidates),
+                                ocm_ident::select::evidence(&id.report.additions)
                             );
                             (counts, exact, one)
                         })
@@ -225,8 +220,9 @@ const PAIRS: [[Cause; 2]; 3] = [
     [Cause::Hysteresis, Cause::Friction],
 ];
 
-/// Regression floor of the exact-pair share, percent: measured 4 of 9 with one seed (seed
-/// 5000; one mass 2 of 3, two masses 2 of 3, chamber 0 of 3); before the bound-constrained
-/// in-loop steps and the held-out guard on swaps, 2 of 6 on the oscillators. The 80 %
-/// is not reached, see the README.
-const PAIR_FLOOR_PCT: usize = 44;
+/// Regression floor of the exact-pair share, percent: measured 3 of 9 with one seed (seed
+/// 5000) after the refinements were made to converge (up to 100 iterations, warm starts from
+/// every refined subset and superset); 4 of 9 before, where the one-mass hysteresis+friction
+/// pair was exact only because the hysteresis alone stopped short of its optimum. The
+/// issue's 80 % is not reached, see the README.
+const PAIR_FLOOR_PCT: usize = 33;

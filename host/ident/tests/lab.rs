@@ -1,7 +1,9 @@
 //! End to end through the virtual lab: the open-loop circle of `ocm track --mcu host
 //! --scenario circle` run in process and identified, (1) converted to the pose schema as the
 //! README documents, (2) as a simulator record: the run with the plant's effects off as the
-//! `sim_` columns beside the run with an effect on.
+//! `sim_` columns beside the run with an effect on. `OCM_LAB_SCENARIO` runs another of the
+//! lab's scenarios instead of the circle, for a look (the bounds are the circle's and need not
+//! hold there).
 
 use ocm_hilsim::effects::Effects;
 use ocm_hilsim::plant::PlateLoad;
@@ -16,7 +18,8 @@ fn circle(effects: Effects) -> (Vec<LogRow>, f64) {
     let mut cfg = SimConfig::default();
     cfg.plant.effects = effects;
     cfg.controllers = vec![ControllerKind::OpenLoop];
-    let report = run_scenario("circle", &cfg).expect("the lab runs the circle");
+    let scenario = std::env::var("OCM_LAB_SCENARIO").unwrap_or_else(|_| "circle".into());
+    let report = run_scenario(&scenario, &cfg).expect("the lab runs the scenario");
     let log = report.runs.into_iter().next().expect("one run").log;
     (log, cfg.plant.external_force_n(&PlateLoad::default())[2])
 }
@@ -157,11 +160,37 @@ fn lab_circle_as_pose_names_the_plants_hysteresis() {
     );
 }
 
+/// Each effect the lab has, alone at the rig's magnitude (hysteresis at 10 %), with the cause
+/// ident must name when the run with it is the measurement and the clean run the simulator:
+/// memory in the columns is `hysteresis`; the per-column stiffness spread changes how far each
+/// chamber's pressure moves the tip, a gain per input (`gain`); the regulators' offsets add a
+/// constant pressure per chamber, an input offset (`offset`).
+fn lab_effects() -> [(&'static str, Effects, Cause); 3] {
+    [
+        ("hysteresis", hysteresis_10pct(), Cause::Hysteresis),
+        (
+            "stiffness spread",
+            Effects {
+                stiffness_spread: Effects::RIG.stiffness_spread,
+                ..Effects::NONE
+            },
+            Cause::Gain,
+        ),
+        (
+            "regulator offsets",
+            Effects {
+                regulator_offset_pa: Effects::RIG.regulator_offset_pa,
+                ..Effects::NONE
+            },
+            Cause::Offset,
+        ),
+    ]
+}
+
 #[test]
 fn lab_circle_as_simulator_record() {
     let cfg = Config::default();
     let (clean, _) = circle(Effects::NONE);
-    let (hyst, _) = circle(hysteresis_10pct());
     // both runs clean: the simulator is exact, nothing is named
     let rec = data::parse_csv(
         &as_series(&clean, &clean),
@@ -171,17 +200,39 @@ fn lab_circle_as_simulator_record() {
     .unwrap();
     let id = identify(&rec, &cfg).unwrap();
     assert_eq!(id.report.causes, [Cause::None], "{}", id.report.verdict);
-    // the plant's hysteresis on top of the clean run: named, most of the error explained
-    let rec = data::parse_csv(
-        &as_series(&hyst, &clean),
-        "lab, hysteresis vs clean",
-        Kind::Series,
-    )
-    .unwrap();
-    let id = identify(&rec, &cfg).unwrap();
-    let r = &id.report;
-    eprintln!("simulator record: {:?}, {}", r.causes, r.verdict);
-    assert!(r.causes.contains(&Cause::Hysteresis), "{}", r.verdict);
-    assert!(r.gain_pct > 80.0, "{}", r.verdict);
-    assert_finite(r, "simulator record");
+    // one effect on: the run with it is the measurement, the clean run the simulator
+    let mut misses = Vec::new();
+    for (label, effects, cause) in lab_effects() {
+        let (measured, _) = circle(effects);
+        let rec = data::parse_csv(
+            &as_series(&measured, &clean),
+            &format!("lab, {label} vs clean"),
+            Kind::Series,
+        )
+        .unwrap();
+        let id = identify(&rec, &cfg).unwrap();
+        let r = &id.report;
+        eprintln!(
+            "simulator record, {label}: {:?}, baseline {:.4} mm, extended {:.4} mm, gain {:.1} %\n  singles: {}\n  additions: {}",
+            r.causes,
+            r.baseline_rmse,
+            r.extended_rmse,
+            r.gain_pct,
+            ocm_ident::select::evidence(&r.candidates),
+            ocm_ident::select::evidence(&r.additions)
+        );
+        // what holds (see the README): the effect's own extension passes on its own and the
+        // named set explains most of the error; the exact cause is named first only for
+        // some effects (a complete cubic of the commands fits a regulator offset seen through
+        // a curved response better than an input offset does, on records with exact positions)
+        let own = r.candidates.iter().find(|c| c.cause == cause);
+        if !own.is_some_and(|c| c.accepted && c.gain_pct > 40.0) || r.gain_pct <= 80.0 {
+            misses.push(format!("{label}: {}", r.verdict));
+        }
+        if r.causes != [cause] {
+            eprintln!("  not exact: {label} named {:?}", r.causes);
+        }
+        assert_finite(r, label);
+    }
+    assert!(misses.is_empty(), "{misses:#?}");
 }

@@ -71,6 +71,8 @@ fn main() -> ocm_mor::Result<()> {
             tolerances: tols,
             every,
             full_timing_steps: 0,
+            opinf: None,
+            opinf_extra: vec![],
         },
         &mut |line| eprintln!("{line}"),
     )?;

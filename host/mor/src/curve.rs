@@ -24,11 +24,17 @@ pub struct CurveOptions {
     pub every: usize,
     /// Full-model steps re-timed in this run (from the first held-out sequence; 0 = all).
     pub full_timing_steps: usize,
+    /// Also fit an operator-inference model at each rank (a row with method `opinf`).
+    pub opinf: Option<crate::opinf::FitOptions>,
+    /// More training snapshots (other seeds, same model) for the operator-inference fits.
+    pub opinf_extra: Vec<Snapshots>,
 }
 
 /// One point of the curve.
 #[derive(Debug, Clone, Serialize)]
 pub struct CurvePoint {
+    /// `galerkin` (every element), `ecsw` or `opinf` (operator inference).
+    pub method: String,
     /// Basis size.
     pub rank: usize,
     /// ECSW tolerance (0 = Galerkin).
@@ -53,7 +59,7 @@ pub struct CurvePoint {
     pub iterations_per_step: f64,
     /// Iteration-matrix refreshes per step (mean).
     pub tangents_per_step: f64,
-    /// Wall time of the ECSW fit, s.
+    /// Wall time of the ECSW fit (of the operator-inference fit for `opinf`), s.
     pub ecsw_seconds: f64,
 }
 
@@ -162,6 +168,7 @@ pub fn sweep(
             };
             let sps = median(&times);
             let pt = CurvePoint {
+                method: if tol > 0.0 { "ecsw" } else { "galerkin" }.into(),
                 rank: r,
                 ecsw_tolerance: tol,
                 elements: rom.elements.len(),
@@ -180,6 +187,44 @@ pub fn sweep(
                 None => format!(
                     "rank {r}, tolerance {tol:e}: {} elements, TCP RMSE {rmse:.3} mm, {:.3} ms/step, {:.0}x",
                     pt.elements, pt.reduced_ms_per_step, pt.speedup
+                ),
+            });
+            points.push(pt);
+        }
+        if let Some(fo) = &opts.opinf {
+            let t1 = std::time::Instant::now();
+            let extra: Vec<&Snapshots> = opts.opinf_extra.iter().collect();
+            let rp = ReducedProbe::of_basis(probe.clone(), &v);
+            let fitted = crate::opinf::fit_snapshots(s, &extra, &v, &probe, fo);
+            let fit_seconds = t1.elapsed().as_secs_f64();
+            let held_seqs = s.rec.sequences..s.rec.sequences + s.rec.held_out;
+            let scored =
+                fitted.and_then(|(m, _)| crate::opinf::snapshot_tcp_rmse_mm(&m, &rp, s, held_seqs));
+            let (rmse, sps, failed) = match scored {
+                Ok((e, times)) => (e, median(&times), None),
+                Err(e) => (f64::NAN, f64::NAN, Some(e.to_string())),
+            };
+            let pt = CurvePoint {
+                method: "opinf".into(),
+                rank: r,
+                ecsw_tolerance: 0.0,
+                elements: 0,
+                captured_energy: energy,
+                held_out_projection_error: perr,
+                projected_tcp_rmse_mm: floor,
+                tcp_rmse_mm: rmse,
+                reduced_ms_per_step: sps * 1e3,
+                speedup: full_sps / sps,
+                iterations_per_step: 0.0,
+                tangents_per_step: 0.0,
+                ecsw_seconds: fit_seconds,
+            };
+            progress(&match failed {
+                Some(f) => format!("rank {r}, operator inference: failed ({f})"),
+                None => format!(
+                    "rank {r}, operator inference: TCP RMSE {rmse:.3} mm, {:.2} us/step, {:.0}x",
+                    sps * 1e6,
+                    pt.speedup
                 ),
             });
             points.push(pt);
@@ -232,11 +277,11 @@ impl Curve {
     /// The curve as CSV (header names the units).
     pub fn csv(&self) -> String {
         let mut out = String::from(
-            "rank,ecsw_tolerance,elements,captured_energy,held_out_projection_error,projected_tcp_rmse_mm,tcp_rmse_mm,reduced_ms_per_step,full_ms_per_step,speedup,iterations_per_step,tangents_per_step\n",
+            "rank,ecsw_tolerance,elements,captured_energy,held_out_projection_error,projected_tcp_rmse_mm,tcp_rmse_mm,reduced_ms_per_step,full_ms_per_step,speedup,iterations_per_step,tangents_per_step,method\n",
         );
         for p in &self.points {
             out.push_str(&format!(
-                "{},{:e},{},{:.9},{:.4e},{:.4},{:.4},{:.4},{:.3},{:.2},{:.3},{:.3}\n",
+                "{},{:e},{},{:.9},{:.4e},{:.4},{:.4},{:.5},{:.3},{:.2},{:.3},{:.3},{}\n",
                 p.rank,
                 p.ecsw_tolerance,
                 p.elements,
@@ -248,7 +293,8 @@ impl Curve {
                 self.full_ms_per_step,
                 p.speedup,
                 p.iterations_per_step,
-                p.tangents_per_step
+                p.tangents_per_step,
+                p.method
             ));
         }
         out

@@ -30,6 +30,8 @@ pub enum ModelKind {
     Full,
     /// The reduced (POD-Galerkin, ECSW) model.
     Reduced,
+    /// The operator-inference reduced model (`ocm mor reduce --method opinf`).
+    ReducedOpinf,
 }
 
 /// One array of a shard.

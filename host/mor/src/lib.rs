@@ -8,7 +8,8 @@
 //! their hashes. [`weighted`] is the stiffness-weighted POD, [`modes`] the full model's rest
 //! modes, static load shapes and Petrov-Galerkin test bases, and [`lspg`] least-squares
 //! Petrov-Galerkin steps on the full step residual (all measured, none better for the bellows:
-//! see the README's error budget).
+//! see the README's error budget). [`opinf`] is the non-intrusive alternative: operator inference
+//! on the POD coordinates (fitted maps, no element sweeps in a step).
 
 #![allow(clippy::needless_range_loop)]
 
@@ -20,6 +21,7 @@ pub mod full;
 pub mod lspg;
 pub mod modes;
 pub mod nnls;
+pub mod opinf;
 pub mod pod;
 pub mod rom;
 pub mod run;

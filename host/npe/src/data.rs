@@ -9,6 +9,11 @@ use serde::{Deserialize, Serialize};
 use crate::model::{Inputs, NpeConfig, Scales};
 use crate::{NpeError, Result};
 
+/// Reach of the gap input in x-y, m: a node with no contact point this near reads "far"
+/// (distance 1 in the input's unit, height 0). The skirt the FEM drapes below the 30 um
+/// threshold lies within one or two node spacings (about 0.4 mm each) of the contact.
+pub const GAP_REACH_M: f64 = 1e-3;
+
 /// Finds the top node nearest to a point in x-y (within one bucket ring of 0.5 mm).
 #[derive(Debug, Clone)]
 pub struct NodeLocator {
@@ -89,6 +94,159 @@ impl NodeLocator {
                 *v = v.max(d);
             }
         }
+    }
+
+    /// Appends the gap input of every node to `out`, two values per node: the x-y distance
+    /// from the node to the nearest contact point over [`GAP_REACH_M`], and that point's
+    /// height above the node's rest position over `z_scale_m` (negative where it presses the
+    /// node down). Nodes with no point within the reach get (1, 0). Equally near points are
+    /// decided by the lower one, so the order of `points_m` does not matter.
+    ///
+    /// `spacing_m` is the contact grid's spacing. When the points lie on such a grid (as
+    /// `ContactGrid` makes them), only the points on the rim of the set (a grid neighbour
+    /// missing) are searched over the whole reach; every node also looks up the (up to four)
+    /// grid positions around it. That is exact: a node whose nearest point has all four grid
+    /// neighbours lies within half a spacing of it in x and y (else the neighbour towards the
+    /// node would be nearer), so that point is one of the four. Points off a grid are each
+    /// searched over the whole reach.
+    pub fn node_gap(
+        &self,
+        points_m: &[[f64; 3]],
+        spacing_m: f64,
+        z_scale_m: f64,
+        out: &mut Vec<f32>,
+    ) {
+        let reach2 = GAP_REACH_M * GAP_REACH_M;
+        let mut best = vec![(reach2, f64::INFINITY); self.rest_m.len()];
+        let grid = PointGrid::new(points_m, spacing_m);
+        let (rows, cols) = (self.rows as i64, self.cols as i64);
+        let at = |v: f64, k: usize| ((v - self.origin[k]) / self.cell).floor() as i64;
+        let offer = |b: &mut (f64, f64), d2: f64, z: f64| {
+            if d2 < b.0 || (d2 == b.0 && z < b.1) {
+                *b = (d2, z);
+            }
+        };
+        for (k, p) in points_m.iter().enumerate() {
+            if grid.as_ref().is_some_and(|g| g.interior[k]) {
+                continue;
+            }
+            let h = GAP_REACH_M;
+            let (c0, c1) = (at(p[0] - h, 0).max(0), at(p[0] + h, 0).min(cols - 1));
+            let (r0, r1) = (at(p[1] - h, 1).max(0), at(p[1] + h, 1).min(rows - 1));
+            for rr in r0..=r1 {
+                for cc in c0..=c1 {
+                    for &i in &self.buckets[(rr * cols + cc) as usize] {
+                        let q = self.rest_m[i];
+                        let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
+                        offer(&mut best[i], d2, p[2]);
+                    }
+                }
+            }
+        }
+        if let Some(g) = &grid {
+            for (q, b) in self.rest_m.iter().zip(best.iter_mut()) {
+                let fx = (q[0] - g.lo[0]) / g.spacing_m;
+                let fy = (q[1] - g.lo[1]) / g.spacing_m;
+                for x in [fx.floor(), fx.ceil()] {
+                    for y in [fy.floor(), fy.ceil()] {
+                        if let Some(k) = g.slot_at(x, y) {
+                            let p = points_m[k];
+                            let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
+                            offer(b, d2, p[2]);
+                        }
+                    }
+                }
+            }
+        }
+        out.reserve(2 * best.len());
+        for (q, (d2, z)) in self.rest_m.iter().zip(best) {
+            if z.is_finite() {
+                out.push((d2.sqrt() / GAP_REACH_M) as f32);
+                out.push(((z - q[2]) / z_scale_m) as f32);
+            } else {
+                out.extend([1.0, 0.0]);
+            }
+        }
+    }
+}
+
+/// Contact points that lie on one grid: the lowest point of each grid position and which
+/// points have all four grid neighbours.
+struct PointGrid {
+    lo: [f64; 2],
+    spacing_m: f64,
+    size: [usize; 2],
+    /// Index of the lowest point at each grid position (`usize::MAX`: none).
+    slot: Vec<usize>,
+    /// Whether each point has points at +-spacing in x and in y.
+    interior: Vec<bool>,
+}
+
+impl PointGrid {
+    /// None when the points do not lie on one grid of `spacing_m` (or there are none).
+    fn new(points_m: &[[f64; 3]], spacing_m: f64) -> Option<Self> {
+        if points_m.is_empty() || !(spacing_m.is_finite() && spacing_m > 0.0) {
+            return None;
+        }
+        let mut lo = [f64::INFINITY; 2];
+        for p in points_m {
+            lo = [lo[0].min(p[0]), lo[1].min(p[1])];
+        }
+        let mut ij = Vec::with_capacity(points_m.len());
+        let mut size = [0usize; 2];
+        for p in points_m {
+            let mut idx = [0usize; 2];
+            for k in 0..2 {
+                let f = (p[k] - lo[k]) / spacing_m;
+                let r = f.round();
+                if (f - r).abs() > 1e-3 || r > 1e6 {
+                    return None;
+                }
+                idx[k] = r as usize;
+                size[k] = size[k].max(idx[k] + 1);
+            }
+            ij.push(idx);
+        }
+        if size[0].saturating_mul(size[1]) > 1 << 24 {
+            return None;
+        }
+        let mut slot = vec![usize::MAX; size[0] * size[1]];
+        for (k, &[i, j]) in ij.iter().enumerate() {
+            let s = &mut slot[j * size[0] + i];
+            if *s == usize::MAX || points_m[k][2] < points_m[*s][2] {
+                *s = k;
+            }
+        }
+        let on = |i: usize, j: usize| slot[j * size[0] + i] != usize::MAX;
+        let interior = ij
+            .iter()
+            .map(|&[i, j]| {
+                i > 0
+                    && j > 0
+                    && i + 1 < size[0]
+                    && j + 1 < size[1]
+                    && on(i - 1, j)
+                    && on(i + 1, j)
+                    && on(i, j - 1)
+                    && on(i, j + 1)
+            })
+            .collect();
+        Some(PointGrid {
+            lo,
+            spacing_m,
+            size,
+            slot,
+            interior,
+        })
+    }
+
+    /// The lowest point at grid position (x, y), if any.
+    fn slot_at(&self, x: f64, y: f64) -> Option<usize> {
+        if x < 0.0 || y < 0.0 || x >= self.size[0] as f64 || y >= self.size[1] as f64 {
+            return None;
+        }
+        let k = self.slot[y as usize * self.size[0] + x as usize];
+        (k != usize::MAX).then_some(k)
     }
 }
 
@@ -211,6 +369,14 @@ impl Prepared {
                 .node_depth(&s.points_m, cfg.scales.z_m, &mut x.node_depth);
             if cfg.contact_prior {
                 contact_gate(&x.node_depth[at..], &self.edges, &mut x.node_gate);
+            }
+            if cfg.node_gap {
+                self.locator.node_gap(
+                    &s.points_m,
+                    cfg.grid_spacing_m(),
+                    cfg.scales.z_m,
+                    &mut x.node_gap,
+                );
             }
         }
         x

@@ -219,6 +219,14 @@ impl Npe {
         if self.config.contact_prior {
             contact_gate(&x.node_depth, &self.surface.edges, &mut x.node_gate);
         }
+        if self.config.node_gap {
+            self.locator.node_gap(
+                &admitted,
+                self.config.grid_spacing_m(),
+                self.config.scales.z_m,
+                &mut x.node_gap,
+            );
+        }
         x.counts.push(kept);
         x.scalars
             .push((force_n / self.config.scales.force_n) as f32);
@@ -310,8 +318,8 @@ impl Npe {
         }
     }
 
-    /// The tactile latent: the global context h_global (eq 6.11) of the contact, `width - 4`
-    /// values; all zeros when no point presses on the face.
+    /// The tactile latent: the global context h_global (eq 6.11) of the contact,
+    /// [`NpeConfig::global_width`] values; all zeros when no point presses on the face.
     pub fn latent(&self, points_m: &[[f64; 3]], force_n: f64, depth_m: f64) -> Result<Vec<f32>> {
         let x = self.admit(points_m, force_n, depth_m)?;
         if x.counts[0] == 0 {

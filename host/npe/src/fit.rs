@@ -52,9 +52,12 @@ pub struct FitOptions {
     /// Weight of the contact head's cross-entropy ([`NpeConfig::lambda_contact`]).
     #[serde(default)]
     pub lambda_contact: f64,
+    /// The gap input ([`NpeConfig::node_gap`]).
+    #[serde(default)]
+    pub node_gap: bool,
     /// Fine-tune this trained engine (`npe.ckpt`) instead of starting from random weights:
-    /// its architecture and scales are kept (`width`, `layers`, the inputs and the contact
-    /// prior of these options are ignored), the loss weights and the contact head are these
+    /// its architecture and scales are kept (`width`, `layers`, the inputs, the gap input and
+    /// the contact prior of these options are ignored), the loss weights and the contact head are these
     /// options'. The split must be the one it was trained with.
     #[serde(default)]
     pub init_from: Option<PathBuf>,
@@ -80,6 +83,7 @@ impl Default for FitOptions {
             contact_prior: false,
             contact_head: false,
             lambda_contact: 1.0,
+            node_gap: false,
             init_from: None,
             progress: false,
         }
@@ -208,6 +212,7 @@ pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
             cfg.width = opts.width;
             cfg.layers = opts.layers;
             cfg.contact_prior = opts.contact_prior;
+            cfg.node_gap = opts.node_gap;
             cfg
         }
     };

@@ -26,6 +26,8 @@ pub struct Kernel {
     prior: Option<f32>,
     /// Gain and offset of the contact head's threshold rule ([`NpeConfig::contact_rule`]).
     rule: (f32, f32),
+    /// Whether the node states carry the gap input ([`NpeConfig::node_gap`]).
+    gap: bool,
 }
 
 impl Kernel {
@@ -44,6 +46,7 @@ impl Kernel {
             geometry_features: cfg.geometry_features,
             prior: cfg.contact_prior.then(|| cfg.depth_to_displacement()),
             rule: cfg.contact_rule(),
+            gap: cfg.node_gap,
         }
     }
 
@@ -82,11 +85,15 @@ impl Kernel {
         let n = self.nodes();
         let width = self.gcn.width();
         let depth = (self.use_geometry && x.node_depth.len() >= n).then(|| &x.node_depth[..n]);
+        let gap = (self.gap && x.node_gap.len() >= 2 * n).then(|| &x.node_gap[..2 * n]);
         let mut h = Vec::with_capacity(n * width);
         for v in 0..n {
             h.extend_from_slice(&hg);
             h.extend_from_slice(&self.positions[3 * v..3 * v + 3]);
             h.push(depth.map_or(0.0, |d| d[v]));
+            if self.gap {
+                h.extend_from_slice(gap.map_or(&[0.0, 0.0], |g| &g[2 * v..2 * v + 2]));
+            }
         }
         debug_assert_eq!(h.len(), n * width);
         self.gcn.forward(&mut h, 1);

@@ -62,8 +62,9 @@ pub struct NpeConfig {
     pub geometry_features: usize,
     /// Hidden width of the fusion MLP.
     pub fusion_hidden: usize,
-    /// Node state width: h_global takes `width - 4`, the rest position 3 and the node's own
-    /// penetration by the contact points 1.
+    /// Node state width: h_global takes what the node inputs leave
+    /// ([`NpeConfig::global_width`]): the rest position takes 3, the node's own penetration by
+    /// the contact points 1 and, with [`NpeConfig::node_gap`], the gap input 2.
     pub width: usize,
     /// Number of GCN layers (L).
     pub layers: usize,
@@ -101,6 +102,13 @@ pub struct NpeConfig {
     /// Weight of the contact head's cross-entropy in the loss (0 when there is no head).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub lambda_contact: f64,
+    /// The gap input: two more values in each node's initial state, the x-y distance to the
+    /// nearest contact point (within [`crate::data::GAP_REACH_M`]) and that point's signed
+    /// height above the node (negative: it presses the node down), so a node just outside
+    /// the contact knows how near and how deep the body is. False in checkpoints written
+    /// before it existed (then not stored, so those still load).
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub node_gap: bool,
 }
 
 fn is_zero(v: &f64) -> bool {
@@ -140,6 +148,7 @@ impl NpeConfig {
             contact_prior: false,
             contact_head: false,
             lambda_contact: 0.0,
+            node_gap: false,
         }
     }
 
@@ -154,22 +163,36 @@ impl NpeConfig {
         (self.scales.z_m / self.scales.displacement_m) as f32
     }
 
-    /// Width of h_global.
+    /// Values each node adds to its initial state: its rest position (3), its own
+    /// penetration (1) and, with the gap input, the distance and height of the nearest
+    /// contact point (2).
+    pub fn node_inputs(&self) -> usize {
+        if self.node_gap { 6 } else { 4 }
+    }
+
+    /// Width of h_global: the node state less the node's own inputs.
     pub fn global_width(&self) -> usize {
-        self.width - 4
+        self.width.saturating_sub(self.node_inputs())
     }
 
     /// Builds the network with weights drawn from `seed`.
     pub fn init(&self, device: &Device, seed: u64) -> Result<NpeNet> {
-        if self.width < 5 || self.layers == 0 {
+        if self.width <= self.node_inputs() || self.layers == 0 {
             return Err(NpeError::Input(format!(
-                "NPE width {} must exceed 4 and layers {} be positive",
-                self.width, self.layers
+                "NPE width {} must exceed the {} node inputs and layers {} be positive",
+                self.width,
+                self.node_inputs(),
+                self.layers
             )));
         }
         if self.contact_prior && !self.use_geometry {
             return Err(NpeError::Input(
                 "the contact prior needs the contact points (geometry input)".into(),
+            ));
+        }
+        if self.node_gap && !self.use_geometry {
+            return Err(NpeError::Input(
+                "the gap input needs the contact points (geometry input)".into(),
             ));
         }
         let encoder = DeepSetsConfig {
@@ -236,6 +259,10 @@ pub struct Inputs {
     /// Contact gate of each node, sample after sample: 1 where the node or a neighbour is
     /// penetrated, else 0 (filled only for an engine with the contact prior).
     pub node_gate: Vec<f32>,
+    /// Gap input of each node, sample after sample, 2 per node: the scaled x-y distance to
+    /// the nearest contact point and that point's scaled height above the node
+    /// ([`crate::data::NodeLocator::node_gap`]; filled only for an engine with the gap input).
+    pub node_gap: Vec<f32>,
 }
 
 /// Multiplier and offset that apply the contact prior to a scaled readout row
@@ -260,7 +287,7 @@ pub struct NpeNet {
 }
 
 impl NpeNet {
-    /// The global context h_global, `[batch, width - 3]`.
+    /// The global context h_global, `[batch, global_width]`.
     pub fn global(&self, cfg: &NpeConfig, x: &Inputs, device: &Device) -> Tensor<2> {
         let b = x.counts.len();
         let total: usize = x.counts.iter().sum();
@@ -288,6 +315,16 @@ impl NpeNet {
             return Tensor::<3>::zeros([n, b, 1], device);
         }
         Tensor::<3>::from_data(TensorData::new(x.node_depth.clone(), [b, n, 1]), device)
+            .swap_dims(0, 1)
+    }
+
+    /// The gap input `[nodes, batch, 2]` (zeros when the inputs carry none).
+    fn node_gap(&self, x: &Inputs, n: usize, device: &Device) -> Tensor<3> {
+        let b = x.counts.len();
+        if x.node_gap.len() != b * n * 2 {
+            return Tensor::<3>::zeros([n, b, 2], device);
+        }
+        Tensor::<3>::from_data(TensorData::new(x.node_gap.clone(), [b, n, 2]), device)
             .swap_dims(0, 1)
     }
 
@@ -326,16 +363,17 @@ impl NpeNet {
         let b = x.counts.len();
         let n = positions.dims()[0];
         let hg = self.global(cfg, x, device);
-        let h0 = Tensor::cat(
-            vec![
-                hg.clone()
-                    .reshape([1, b, cfg.global_width()])
-                    .repeat_dim(0, n),
-                positions.clone().repeat_dim(1, b),
-                self.node_depth(cfg, x, n, device),
-            ],
-            2,
-        );
+        let mut parts = vec![
+            hg.clone()
+                .reshape([1, b, cfg.global_width()])
+                .repeat_dim(0, n),
+            positions.clone().repeat_dim(1, b),
+            self.node_depth(cfg, x, n, device),
+        ];
+        if cfg.node_gap {
+            parts.push(self.node_gap(x, n, device));
+        }
+        let h0 = Tensor::cat(parts, 2);
         let h = self.gcn.forward(h0, graph);
         let head = self.contact.as_ref().map(|c| c.forward(h.clone()));
         let out = self.readout.forward(h);

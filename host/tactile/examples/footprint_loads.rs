@@ -4,7 +4,10 @@
 //! with the error split into its normal (z) and in-plane parts. The sets `each_z` and
 //! `each_xyz` stand for a unit force along z (or along x, y and z) on every footprint node
 //! alone: the span of every linear response to a normal pressure (or any traction) on the
-//! footprint, the best any such per-placement mode could do.
+//! footprint, the best any such per-placement mode could do. `nl_<load>` stands for the
+//! second-order field of a load's response: the response scaled to the deepest frame's depth
+//! (largest |u_z|), then one modified-Newton correction with the rest tangent
+//! (`RestStiffness::nonlinear_correction`), which holds the in-plane flow a linear response lacks.
 //!
 //! `cargo run -p ocm-tactile --example footprint_loads -- ROM RANKS SETUPS SETS [FEM_ROOTS]`
 //! e.g. `-- out/tactile/rom 10,20 id3,r2-0021-texture1 foot+rim,foot+rim+out`.
@@ -94,6 +97,33 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             each.push((label, cols));
         }
+        let mut second = Vec::new();
+        for (label, u) in &responses {
+            let key = format!("nl_{label}");
+            if !sets.iter().any(|s| s.contains(&key.as_str())) {
+                continue;
+            }
+            let top = u.chunks(3).map(|c| c[2].abs()).fold(0.0, f64::max);
+            let t = std::time::Instant::now();
+            // A unit load's response concentrates under the loaded nodes: where it inverts an
+            // element at the deepest depth the scale is halved (the correction's shape is
+            // dominated by its second-order part at every admissible scale).
+            let mut scale = deepest / top.max(1e-30);
+            let du = loop {
+                let scaled: Vec<f64> = u.iter().map(|v| v * scale).collect();
+                match rest.nonlinear_correction(&gel, &scaled) {
+                    Ok(du) => break du,
+                    Err(_) if scale * top > 0.01 * deepest => scale *= 0.5,
+                    Err(e) => return Err(e.into()),
+                }
+            };
+            eprintln!(
+                "{name}: {key}: correction {:.1} ms at max |u_z| {:.3} mm",
+                t.elapsed().as_secs_f64() * 1e3,
+                scale * top * 1e3
+            );
+            second.push((key, du));
+        }
         for &r in &ranks {
             let m = rom.truncated(r)?;
             for set in std::iter::once(Vec::new()).chain(sets.iter().cloned()) {
@@ -104,6 +134,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     }
                     if let Some((_, us)) = each.iter().find(|(k, _)| k == l) {
                         extra.extend(us.iter());
+                    }
+                    if let Some((_, u)) = second.iter().find(|(k, _)| k == l) {
+                        extra.push(u);
                     }
                 }
                 let q = orthonormal(&m, &extra);

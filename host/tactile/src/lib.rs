@@ -14,6 +14,7 @@ pub mod contact;
 pub mod dataset;
 pub mod error;
 pub mod gel;
+pub mod hyper;
 pub mod image_io;
 pub mod indent;
 pub mod indenter;

@@ -305,6 +305,161 @@ fn perception_with_iou_loss_learns_and_fails_on_shuffled_targets() {
     );
 }
 
+/// A block gel under the synthetic images (24 x 16 pixels of 62.5 um: 1.5 x 1 mm, 0.5 mm
+/// thick, base fixed), its linear top-face force map and the resampler from the image grid.
+fn block_force_map() -> (
+    ocm_tactile::nets::force::LinearForceMap,
+    ocm_tactile::optics::GridToMesh,
+) {
+    use ocm_tactile::gel::{Gel, GelMaterial};
+    let mesh = ocm_fem::mesh::generate::box_mesh([12, 8, 4], [1.5e-3, 1e-3, 0.5e-3]);
+    let gel = Gel::from_mesh(mesh, GelMaterial::default(), 1e-9).unwrap();
+    let top = ocm_tactile::dataset::TopSurface::from_gel(&gel);
+    let map = ocm_tactile::optics::CameraMap {
+        px_per_m: 1.0 / 62.5e-6,
+        angle_rad: 0.0,
+        mirror: false,
+        offset_px: [0.0, 0.0],
+    };
+    let to_mesh = ocm_tactile::optics::GridToMesh::new(&top.rest_m, ROWS, COLS, &map).unwrap();
+    let lin = ocm_tactile::nets::force::LinearForceMap::new(&gel).unwrap();
+    (lin, to_mesh)
+}
+
+/// Pixel weights of every sample's own target field (30 um patch).
+fn force_weights(
+    pairs: &Pairs,
+    lin: &ocm_tactile::nets::force::LinearForceMap,
+    to_mesh: &ocm_tactile::optics::GridToMesh,
+) -> Vec<f32> {
+    let n = ROWS * COLS;
+    (0..pairs.len())
+        .flat_map(|i| {
+            lin.pixel_weights(to_mesh, &pairs.dz_m[i * n..(i + 1) * n], nets::CONTACT_DZ_M)
+                .unwrap()
+        })
+        .collect()
+}
+
+/// The surface-force term equals the force of the depth error computed on the gel directly:
+/// loss(w) - loss(0) = w mean over samples of (F(pred) - F(true))^2, F the linear force of each
+/// field resampled onto the top nodes with the true field's patch (the node-level path, not
+/// the pixel weights the loss uses); bad weights are refused.
+#[test]
+fn force_loss_is_the_force_of_the_depth_error() {
+    let pairs = synthetic(6, 8);
+    let (lin, to_mesh) = block_force_map();
+    let mut data = NetData::new(NetKind::Perception, &pairs);
+    let net = small(NetKind::Perception).init(&cpu(), 3).unwrap();
+    let idx: Vec<usize> = (0..6).collect();
+    let dev = cpu();
+    let at = |d: &NetData| f64::from(ocm_learn::values(d.loss(&net, &idx, &idx, &dev))[0]);
+    let mse = at(&data);
+    let w = force_weights(&pairs, &lin, &to_mesh);
+    assert!(data.set_force_loss(0.5, w[1..].to_vec()).is_err());
+    let mut bad = w.clone();
+    bad[7] = f32::NAN;
+    assert!(data.set_force_loss(0.5, bad).is_err());
+    assert!(data.set_force_loss(f32::NAN, w.clone()).is_err());
+    data.set_force_loss(0.5, w).unwrap();
+    let with = at(&data);
+    let pred = data.predict(&net, &idx, 6, &dev);
+    let n = ROWS * COLS;
+    let mut term = 0.0;
+    for k in 0..6 {
+        let truth = to_mesh.sample(&pairs.dz_m[k * n..(k + 1) * n]).unwrap();
+        let guess = to_mesh.sample(&pred[k * n..(k + 1) * n]).unwrap();
+        let (patch, wn) = lin.patch_weights(&truth, nets::CONTACT_DZ_M).unwrap();
+        assert!(!patch.is_empty());
+        let df: f64 = -patch
+            .iter()
+            .zip(&wn)
+            .map(|(&j, w)| w * (guess[j] - truth[j]))
+            .sum::<f64>();
+        term += df * df;
+    }
+    let term = term / 6.0;
+    assert!(term > 1e-6, "{term}");
+    let got = (with - mse) / 0.5;
+    eprintln!("force term {term:.4e} N^2 beside the MSE {mse:.4e}");
+    assert!((got - term).abs() < 2e-3 * term, "{got} vs {term}");
+    let mut render = NetData::new(NetKind::Rendering, &pairs);
+    assert!(render.set_force_loss(0.5, vec![0.0; 6 * n]).is_err());
+}
+
+/// Training with the force term beside eq 5.15 learns the held-out force (its linear force
+/// error well below that of predicting the mean field) and does not on shuffled targets.
+#[test]
+fn perception_with_force_loss_learns_and_fails_on_shuffled_targets() {
+    let pairs = synthetic(40, 3);
+    let (lin, to_mesh) = block_force_map();
+    let w = force_weights(&pairs, &lin, &to_mesh);
+    let n = ROWS * COLS;
+    let split = Split {
+        train: (0..32).collect(),
+        val: (32..40).collect(),
+    };
+    let force = |field: &[f32]| lin.force(&to_mesh.sample(field).unwrap(), nets::CONTACT_DZ_M);
+    let truth: Vec<f64> = split
+        .val
+        .iter()
+        .map(|&i| force(&pairs.dz_m[i * n..(i + 1) * n]).unwrap())
+        .collect();
+    let mean_field: Vec<f32> = (0..n)
+        .map(|p| {
+            split
+                .train
+                .iter()
+                .map(|&i| pairs.dz_m[i * n + p])
+                .sum::<f32>()
+                / 32.0
+        })
+        .collect();
+    let f_mean = force(&mean_field).unwrap();
+    let rmse = |f: &dyn Fn(usize) -> f64| {
+        (truth
+            .iter()
+            .enumerate()
+            .map(|(k, t)| (f(k) - t).powi(2))
+            .sum::<f64>()
+            / truth.len() as f64)
+            .sqrt()
+    };
+    let base = rmse(&|_| f_mean);
+    let run = |shuffle| {
+        let mut data = NetData::new(NetKind::Perception, &pairs);
+        data.set_force_loss(20.0, w.clone()).unwrap();
+        let net = small(NetKind::Perception)
+            .init(&cpu_autodiff(), 11)
+            .unwrap();
+        let tc = TrainConfig {
+            epochs: 40,
+            batch_size: 8,
+            learning_rate: 3e-3,
+            val_fraction: 0.0,
+            patience: 0,
+            grad_clip_norm: None,
+            seed: 5,
+            progress: false,
+        };
+        let report = nets::train(&data, net, &split, &tc, shuffle).unwrap();
+        let pred = data.predict(&report.model, &split.val, 8, &cpu());
+        rmse(&|k| force(&pred[k * n..(k + 1) * n]).unwrap())
+    };
+    let (trained, shuffled) = (run(None), run(Some(9)));
+    eprintln!(
+        "force term: held-out linear force RMSE {trained:.4} N, shuffled {shuffled:.4} N, mean field {base:.4} N"
+    );
+    assert!(
+        trained < 0.5 * base,
+        "{trained} against the mean field's {base}"
+    );
+    assert!(
+        shuffled > base,
+        "shuffled targets reach {shuffled} N against {base}: the test cannot fail"
+    );
+}
+
 #[test]
 fn rendering_training_learns_and_fails_on_shuffled_targets() {
     let (held, train) = held_out_ratio(NetKind::Rendering, None);

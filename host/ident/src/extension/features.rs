@@ -127,12 +127,23 @@ impl Prepared<'_> {
                 }
             }
             Cause::Hysteresis => {
+                let simulator = matches!(self.baseline, Baseline::Simulator);
                 for &k in &rec.drives {
                     let u = &rec.inputs[k].values;
+                    // On a simulator, the sign of its mean sensitivity to the input (read off
+                    // the simulated rows) in the orientation being fitted (`memory_sign`:
+                    // whether the output lags its input or leads it, which a simulator does
+                    // not say). Weighting the memory by the sensitivity row by row named a
+                    // spurious `gain` beside a memory added at the output.
+                    let through = if simulator {
+                        ch.sign[k] * self.memory_sign.get()
+                    } else {
+                        ch.sign[k]
+                    };
                     for &w in &PLAY_WIDTHS {
                         let r = w * self.ranges[k];
                         let p = signal::play(u, &rec.segment_starts, r);
-                        cols.push((0..n).map(|i| ch.sign[k] * (u[i] - p[i])).collect());
+                        cols.push((0..n).map(|i| through * (u[i] - p[i])).collect());
                         names.push(format!("PI weight {} r={:.3}", rec.inputs[k].name, r));
                         nonneg.push(true);
                     }
@@ -351,8 +362,49 @@ impl Prepared<'_> {
                 }
             }
         }
+        if matches!(self.baseline, Baseline::Simulator)
+            && matches!(cause, Cause::Offset | Cause::Gain)
+        {
+            // A simulator linear in an input has a constant sensitivity: its input offset is
+            // the output bias, its input gain the output gain. Dependent columns are left out
+            // (they would only cancel each other).
+            keep_independent(&mut cols, &mut names, &mut nonneg, &self.train);
+        }
         (cols, names, nonneg)
     }
+}
+
+/// Drops each column that the columns before it span on the training rows to 1e-6 of its
+/// norm (modified Gram-Schmidt), with its name and flag.
+fn keep_independent(
+    cols: &mut Vec<Vec<f64>>,
+    names: &mut Vec<String>,
+    nonneg: &mut Vec<bool>,
+    train: &[bool],
+) {
+    let rows: Vec<usize> = (0..train.len()).filter(|&i| train[i]).collect();
+    let mut basis: Vec<Vec<f64>> = Vec::new();
+    let mut keep = Vec::new();
+    for col in cols.iter() {
+        let mut v: Vec<f64> = rows.iter().map(|&i| col[i]).collect();
+        let norm0 = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        for q in &basis {
+            let d: f64 = v.iter().zip(q).map(|(a, b)| a * b).sum();
+            v.iter_mut().zip(q).for_each(|(a, b)| *a -= d * b);
+        }
+        let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let independent = norm0 > 0.0 && norm > 1e-6 * norm0;
+        if independent {
+            basis.push(v.iter().map(|x| x / norm).collect());
+        }
+        keep.push(independent);
+    }
+    let mut it = keep.iter();
+    cols.retain(|_| *it.next().unwrap_or(&false));
+    let mut it = keep.iter();
+    names.retain(|_| *it.next().unwrap_or(&false));
+    let mut it = keep.iter();
+    nonneg.retain(|_| *it.next().unwrap_or(&false));
 }
 
 /// Threshold levels per drive of the Preisach plane (`levels (levels + 1) / 2` relays).

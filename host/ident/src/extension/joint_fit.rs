@@ -52,6 +52,29 @@ impl Prepared<'_> {
     /// actuator needs whose pressure-to-force map is curved and slower than the structure (the
     /// soft arm, see the README). The second is tried for `nonlinearity` alone.
     pub fn fit_set(&self, causes: &[Cause]) -> SetFit {
+        if matches!(self.baseline, Baseline::Simulator) && causes.contains(&Cause::Hysteresis) {
+            // A simulator does not say whether its output lags its inputs or leads them (a
+            // displacement driven by a force lags, a force driven by a displacement leads):
+            // the memory is fitted in both orientations, with non-negative weights each, and
+            // the lower BIC on training rows kept.
+            let bic = |f: &SetFit| -> f64 {
+                if !f.ill_conditioned.is_empty() {
+                    return f64::INFINITY;
+                }
+                let rows = f.rows.max(1) as f64;
+                f.rss.iter().map(|r| rows * r.max(1e-300).ln()).sum()
+            };
+            self.memory_sign.set(1.0);
+            let leads = self.fit_set_variant(causes);
+            self.memory_sign.set(-1.0);
+            let lags = self.fit_set_variant(causes);
+            self.memory_sign.set(1.0);
+            return if bic(&lags) < bic(&leads) {
+                lags
+            } else {
+                leads
+            };
+        }
         let stiffening = self.fit_set_variant(causes);
         // Alone only: the actuator variant is fitted outside the loop, so beside it a further
         // cause would lose its in-loop refinement (with it in sets, a friction beside a

@@ -66,6 +66,10 @@ pub struct Prepared<'a> {
     /// In-loop refinements already done, per channel and set of causes (see `in_loop`): the
     /// selection fits the same sets repeatedly, and a larger set starts from a smaller one.
     pub(super) in_loop_cache: std::cell::RefCell<Vec<super::refined::Cached>>,
+    /// Orientation of the hysteresis on a simulator record, +1 or -1: whether the measured
+    /// output leads the simulated one through the memory in its inputs or lags it (see
+    /// `joint_fit`: both are fitted, the lower BIC kept).
+    pub memory_sign: std::cell::Cell<f64>,
 }
 
 impl<'a> Prepared<'a> {
@@ -134,11 +138,16 @@ impl<'a> Prepared<'a> {
                 };
                 let up = eval(h);
                 let dn = eval(-h);
-                let j: Vec<f64> = up
-                    .iter()
-                    .zip(&dn)
-                    .map(|(a, b)| (a - b) / (2.0 * h))
-                    .collect();
+                let j: Vec<f64> = if matches!(baseline, Baseline::Simulator) {
+                    // the simulator's output is given, not a function ident can evaluate:
+                    // its sensitivity to each input is read off the simulated rows
+                    simulator_sensitivity(&cols, &rec.simulated[c].values, &means, &ranges, k)
+                } else {
+                    up.iter()
+                        .zip(&dn)
+                        .map(|(a, b)| (a - b) / (2.0 * h))
+                        .collect()
+                };
                 let m: f64 = (0..n).filter(|&i| train[i]).map(|i| j[i]).sum();
                 sign.push(if m < 0.0 { -1.0 } else { 1.0 });
                 jac.push(j);
@@ -170,6 +179,7 @@ impl<'a> Prepared<'a> {
             flexible: std::cell::Cell::new(None),
             actuator_pole: std::cell::Cell::new(None),
             in_loop_cache: std::cell::RefCell::new(Vec::new()),
+            memory_sign: std::cell::Cell::new(1.0),
         }
     }
 
@@ -288,4 +298,72 @@ pub fn channel_scale(ch: &ChannelFit, train: &[bool]) -> f64 {
     } else {
         s / k as f64
     }
+}
+
+/// The sensitivity of a simulator's output to input `k`, row by row: the derivative of a
+/// complete polynomial in the normalised inputs fitted to the simulated output on every row
+/// (cubic up to 4 inputs, quadratic up to 8, linear beyond). A simulator that responds to its
+/// inputs with a delay or dynamics is read as its best static map; the sensitivity only
+/// orients and scales the extensions that act through the inputs (an input offset, an
+/// input gain, memory in an input), it never enters the baseline.
+fn simulator_sensitivity(
+    inputs: &[&[f64]],
+    sim: &[f64],
+    means: &[f64],
+    ranges: &[f64],
+    k: usize,
+) -> Vec<f64> {
+    let m = inputs.len();
+    let n = sim.len();
+    let degree = match m {
+        0..=4 => 3,
+        5..=8 => 2,
+        _ => 1,
+    };
+    // exponent tuples of every monomial of total degree 1..=degree
+    fn tuples(m: usize, left: usize, prefix: &mut Vec<u32>, out: &mut Vec<Vec<u32>>) {
+        if prefix.len() == m {
+            if prefix.iter().any(|e| *e > 0) {
+                out.push(prefix.clone());
+            }
+            return;
+        }
+        for e in 0..=left {
+            prefix.push(e as u32);
+            tuples(m, left - e, prefix, out);
+            prefix.pop();
+        }
+    }
+    let mut exps = Vec::new();
+    tuples(m, degree, &mut Vec::new(), &mut exps);
+    let z: Vec<Vec<f64>> = (0..m)
+        .map(|j| {
+            inputs[j]
+                .iter()
+                .map(|u| (u - means[j]) / ranges[j])
+                .collect()
+        })
+        .collect();
+    let mono = |e: &[u32], i: usize| -> f64 { (0..m).map(|j| z[j][i].powi(e[j] as i32)).product() };
+    let mut cols: Vec<Vec<f64>> = vec![vec![1.0; n]];
+    cols.extend(exps.iter().map(|e| (0..n).map(|i| mono(e, i)).collect()));
+    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+    let fit = lsq::fit(&refs, sim, &vec![true; n], &[]);
+    if fit.coef.iter().any(|c| !c.is_finite()) {
+        return vec![0.0; n];
+    }
+    (0..n)
+        .map(|i| {
+            exps.iter()
+                .zip(&fit.coef[1..])
+                .filter(|(e, _)| e[k] > 0)
+                .map(|(e, c)| {
+                    let mut d = e.to_vec();
+                    d[k] -= 1;
+                    c * f64::from(e[k]) * mono(&d, i)
+                })
+                .sum::<f64>()
+                / ranges[k]
+        })
+        .collect()
 }

@@ -227,6 +227,147 @@ pub fn cauchy_stress(law: &ocm_fem::material::Material, f: &Matrix3<f64>) -> Opt
     Some(p * f.transpose() / f.determinant())
 }
 
+/// The gel's small-strain response of its top face in z, for the surface force as a linear
+/// function of the top-face u_z: with z forces on the patch nodes only (x, y free, the rest of
+/// the face traction free, the base fixed), u_P = C_PP f_P, so prescribing u_P takes the nodal
+/// forces f_P = C_PP^-1 u_P and the force on the indenter is -1^T C_PP^-1 u_P = -w . u_P with
+/// w = C_PP^-1 1 (C symmetric). This is the reaction form of [`SurfaceForceModel::solve`] with
+/// `Prescribe::ContactZ`, linearised at rest; for a fixed patch it is linear in u_z, so it can
+/// weigh a network's depth error by what it does to the force (a training loss), and it scores
+/// a field in milliseconds instead of a Newton solve.
+#[derive(Debug, Clone)]
+pub struct LinearForceMap {
+    n: usize,
+    /// `compliance[k * n + l]`: u_z of top node l per newton of z force on top node k, m/N.
+    compliance: Vec<f64>,
+    /// Whether each top node's z is free (not held by the base).
+    free_z: Vec<bool>,
+}
+
+impl LinearForceMap {
+    /// Factorises the gel's stiffness at rest and solves once per top node for its column of
+    /// the top face's z compliance (about 2,500 solves on the DIGIT gel).
+    pub fn new(gel: &Gel) -> Result<Self> {
+        use ocm_fem::model::Pattern;
+        use ocm_fem::solve::linear::SparseSolver;
+        use rayon::prelude::*;
+        let model = &gel.model;
+        let pat = Pattern::new(model)?;
+        let ev = model.evaluate(&pat, &model.rest_dofs(), &Loads::default(), 1.0, true)?;
+        let k = ev
+            .tangent
+            .ok_or_else(|| TactileError::Input("the gel model gave no stiffness".into()))?;
+        let mut lin = SparseSolver::new(pat.num_free(), pat.col_ptr.clone(), pat.row_idx.clone());
+        lin.factorize(&k)?;
+        let nf = pat.num_free();
+        let dof: Vec<usize> = gel.top.iter().map(|&i| pat.free_of[3 * i + 2]).collect();
+        let n = dof.len();
+        let cols = (0..n)
+            .into_par_iter()
+            .map(|k| -> Result<Vec<f64>> {
+                let mut col = vec![0.0; n];
+                if dof[k] >= nf {
+                    return Ok(col);
+                }
+                let mut rhs = vec![0.0; nf];
+                rhs[dof[k]] = 1.0;
+                lin.solve_factored(&mut rhs)?;
+                for (c, &d) in col.iter_mut().zip(&dof) {
+                    if d < nf {
+                        *c = rhs[d];
+                    }
+                }
+                Ok(col)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(LinearForceMap {
+            n,
+            compliance: cols.concat(),
+            free_z: dof.iter().map(|&d| d < nf).collect(),
+        })
+    }
+
+    /// Number of top nodes (the length of the fields taken).
+    pub fn top_nodes(&self) -> usize {
+        self.n
+    }
+
+    /// u_z of top node `l` per newton of z force on top node `k`, m/N.
+    pub fn compliance(&self, k: usize, l: usize) -> f64 {
+        self.compliance[k * self.n + l]
+    }
+
+    /// The patch of `u_z_m` (top nodes indented over `threshold_m` whose z is free) and the
+    /// weight w of each of its nodes, N/m: the force on the indenter is -sum w_k u_z_k.
+    pub fn patch_weights(&self, u_z_m: &[f64], threshold_m: f64) -> Result<(Vec<usize>, Vec<f64>)> {
+        if u_z_m.len() != self.n {
+            return Err(TactileError::Input(format!(
+                "surface u_z of {} nodes for a gel top face of {}",
+                u_z_m.len(),
+                self.n
+            )));
+        }
+        if let Some(k) = u_z_m.iter().position(|v| !v.is_finite()) {
+            return Err(TactileError::Input(format!(
+                "surface u_z of top node {k} is {}",
+                u_z_m[k]
+            )));
+        }
+        let patch: Vec<usize> = (0..self.n)
+            .filter(|&k| self.free_z[k] && -u_z_m[k] > threshold_m)
+            .collect();
+        if patch.is_empty() {
+            return Ok((patch, Vec::new()));
+        }
+        let m = patch.len();
+        let c = nalgebra::DMatrix::from_fn(m, m, |a, b| {
+            0.5 * (self.compliance(patch[a], patch[b]) + self.compliance(patch[b], patch[a]))
+        });
+        let w = c
+            .cholesky()
+            .ok_or_else(|| {
+                TactileError::Input(format!(
+                    "the top face's compliance on a patch of {m} nodes is not positive definite"
+                ))
+            })?
+            .solve(&nalgebra::DVector::from_element(m, 1.0));
+        Ok((patch, w.iter().copied().collect()))
+    }
+
+    /// Force on the indenter (up positive) of the top-face field `u_z_m` with its own patch, N.
+    pub fn force(&self, u_z_m: &[f64], threshold_m: f64) -> Result<f64> {
+        let (patch, w) = self.patch_weights(u_z_m, threshold_m)?;
+        Ok(-patch
+            .iter()
+            .zip(&w)
+            .map(|(&k, w)| w * u_z_m[k])
+            .sum::<f64>())
+    }
+
+    /// Per-pixel weights W (N/m) of the force of image-grid fields with the patch of `dz_m`
+    /// (`[rows, cols]` of `to_mesh`, m): the force of a field v with that patch is -sum W v,
+    /// the linear force of `dz_m` itself included. The adjoint of the bilinear resampling
+    /// carries the nodal weights onto the pixels.
+    pub fn pixel_weights(
+        &self,
+        to_mesh: &crate::optics::GridToMesh,
+        dz_m: &[f32],
+        threshold_m: f64,
+    ) -> Result<Vec<f32>> {
+        let u = to_mesh.sample(dz_m)?;
+        let (patch, w) = self.patch_weights(&u, threshold_m)?;
+        let mut node_w = vec![0.0; self.n];
+        for (&k, w) in patch.iter().zip(&w) {
+            node_w[k] = *w;
+        }
+        Ok(to_mesh
+            .scatter(&node_w)?
+            .into_iter()
+            .map(|v| v as f32)
+            .collect())
+    }
+}
+
 /// One held-out sample's total surface force, N (force on the indenter, up positive).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ForceSample {
@@ -313,12 +454,7 @@ pub fn score_force(
             model.top_nodes()
         )));
     }
-    let mut first = Vec::with_capacity(ds.setups.len());
-    let mut acc = 0;
-    for s in &ds.setups {
-        first.push(acc);
-        acc += s.displacement_m.len();
-    }
+    let first = first_states(ds);
     let how = if stuck {
         Prescribe::ContactXyz { threshold_m }
     } else {
@@ -333,22 +469,7 @@ pub fn score_force(
     };
     let mut per_sample = Vec::with_capacity(idx.len());
     for (k, &i) in idx.iter().enumerate() {
-        let (si, state) = (pairs.setup[i], pairs.state[i]);
-        let s = &ds.setups[si];
-        let j = state
-            .checked_sub(first[si])
-            .filter(|&j| j < s.displacement_m.len())
-            .ok_or_else(|| {
-                TactileError::Input(format!(
-                    "sample {i} (state {state}) is not in set-up {}",
-                    s.name
-                ))
-            })?;
-        if pairs.mirror[i] != 0 {
-            return Err(TactileError::Input(format!(
-                "sample {i} is mirrored: no FEM force"
-            )));
-        }
+        let (s, j) = fem_state(pairs, ds, &first, i)?;
         let pred = model.solve(&on_nodes(&pred_dz_m[k * n..(k + 1) * n])?, how)?;
         let (mut grid_truth_n, mut fem_field_n) = (f64::NAN, f64::NAN);
         if floors {
@@ -397,6 +518,142 @@ pub fn score_force(
         threshold_m,
         stuck,
         seconds: t0.elapsed().as_secs_f64(),
+        per_sample,
+    })
+}
+
+/// Index of each set-up's first state in the data set's state numbering.
+fn first_states(ds: &crate::dataset::Dataset) -> Vec<usize> {
+    let mut first = Vec::with_capacity(ds.setups.len());
+    let mut acc = 0;
+    for s in &ds.setups {
+        first.push(acc);
+        acc += s.displacement_m.len();
+    }
+    first
+}
+
+/// The FEM set-up and step of sample `i` of `pairs`; an error for a mirrored sample (it has no
+/// FEM force) or one outside its set-up.
+fn fem_state<'d>(
+    pairs: &super::pairs::Pairs,
+    ds: &'d crate::dataset::Dataset,
+    first: &[usize],
+    i: usize,
+) -> Result<(&'d crate::dataset::SetupSamples, usize)> {
+    let (si, state) = (pairs.setup[i], pairs.state[i]);
+    let s = &ds.setups[si];
+    let j = state
+        .checked_sub(first[si])
+        .filter(|&j| j < s.displacement_m.len())
+        .ok_or_else(|| {
+            TactileError::Input(format!(
+                "sample {i} (state {state}) is not in set-up {}",
+                s.name
+            ))
+        })?;
+    if pairs.mirror[i] != 0 {
+        return Err(TactileError::Input(format!(
+            "sample {i} is mirrored: no FEM force"
+        )));
+    }
+    Ok((s, j))
+}
+
+/// One sample's force from the linear map ([`LinearForceMap`]), N.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct LinearForceSample {
+    /// Sample index in the pairs.
+    pub sample: usize,
+    /// Set-up name.
+    pub setup: String,
+    /// Indentation depth, mm.
+    pub depth_mm: f64,
+    /// The contact FEM's force on the indenter.
+    pub fem_n: f64,
+    /// Linear force of the predicted u_z (image grid -> top nodes, its own patch).
+    pub predicted_n: f64,
+    /// Linear force of the FEM's u_z rasterised on the image grid.
+    pub grid_truth_n: f64,
+    /// Linear force of the FEM's nodal u_z.
+    pub fem_field_n: f64,
+}
+
+/// Surface force through the linear map on held-out samples: the quantity the training's
+/// force term acts on, in seconds where the Newton solves of [`score_force`] take minutes.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct LinearForceScores {
+    /// Samples scored.
+    pub samples: usize,
+    /// RMSE of the predicted field's linear force against the FEM's force, N.
+    pub rmse_predicted_n: f64,
+    /// RMSE of the predicted field's linear force against that of the FEM's field on the image
+    /// grid (what the training term penalises), N.
+    pub rmse_predicted_vs_grid_n: f64,
+    /// RMSE of the FEM's image-grid field's linear force against the FEM's force, N.
+    pub rmse_grid_truth_n: f64,
+    /// RMSE of the FEM's nodal field's linear force against the FEM's force, N.
+    pub rmse_fem_field_n: f64,
+    /// Patch threshold, m.
+    pub threshold_m: f64,
+    /// Every sample.
+    pub per_sample: Vec<LinearForceSample>,
+}
+
+/// Scores predicted u_z fields `pred_dz_m` (`[rows, cols]` per sample of `idx`, m) through the
+/// linear force map against the contact FEM's forces of `ds`, with the FEM's own fields on the
+/// image grid and on the nodes beside them.
+pub fn score_force_linear(
+    lin: &LinearForceMap,
+    to_mesh: &crate::optics::GridToMesh,
+    pairs: &super::pairs::Pairs,
+    ds: &crate::dataset::Dataset,
+    pred_dz_m: &[f32],
+    idx: &[usize],
+    threshold_m: f64,
+) -> Result<LinearForceScores> {
+    let n = pairs.pixels();
+    if pred_dz_m.len() != idx.len() * n || to_mesh.len() != lin.top_nodes() {
+        return Err(TactileError::Input(format!(
+            "{} predicted values for {} samples of {n} pixels; resampler of {} points for {} top nodes",
+            pred_dz_m.len(),
+            idx.len(),
+            to_mesh.len(),
+            lin.top_nodes()
+        )));
+    }
+    let first = first_states(ds);
+    let mut per_sample = Vec::with_capacity(idx.len());
+    for (k, &i) in idx.iter().enumerate() {
+        let (s, j) = fem_state(pairs, ds, &first, i)?;
+        let nodal: Vec<f64> = s.displacement_m[j].iter().map(|u| u[2]).collect();
+        per_sample.push(LinearForceSample {
+            sample: i,
+            setup: s.name.clone(),
+            depth_mm: s.depth_m[j] * 1e3,
+            fem_n: s.force_n[j][2],
+            predicted_n: lin.force(
+                &to_mesh.sample(&pred_dz_m[k * n..(k + 1) * n])?,
+                threshold_m,
+            )?,
+            grid_truth_n: lin.force(
+                &to_mesh.sample(&pairs.dz_m[i * n..(i + 1) * n])?,
+                threshold_m,
+            )?,
+            fem_field_n: lin.force(&nodal, threshold_m)?,
+        });
+    }
+    let rmse = |f: &dyn Fn(&LinearForceSample) -> f64| {
+        (per_sample.iter().map(|s| f(s).powi(2)).sum::<f64>() / per_sample.len().max(1) as f64)
+            .sqrt()
+    };
+    Ok(LinearForceScores {
+        samples: per_sample.len(),
+        rmse_predicted_n: rmse(&|s| s.predicted_n - s.fem_n),
+        rmse_predicted_vs_grid_n: rmse(&|s| s.predicted_n - s.grid_truth_n),
+        rmse_grid_truth_n: rmse(&|s| s.grid_truth_n - s.fem_n),
+        rmse_fem_field_n: rmse(&|s| s.fem_field_n - s.fem_n),
+        threshold_m,
         per_sample,
     })
 }
@@ -528,6 +785,99 @@ mod tests {
         let bad = vec![[0.0, 0.0, f64::NAN]; model.top_nodes()];
         assert!(model.solve(&bad, Prescribe::All).is_err());
         assert!(model.solve(&bad[1..], Prescribe::All).is_err());
+    }
+
+    /// The linear force map against the Newton solve it linearises: a shallow cap (2 um deep,
+    /// where the Neo-Hookean response is linear to about 1e-3) gives the reaction force of
+    /// `solve` with `ContactZ` on the same patch; a 100 um cap stays within a few percent (the
+    /// law's stiffening). The compliance is symmetric (Maxwell-Betti), and the per-pixel
+    /// weights reproduce the nodal force of the resampled image field.
+    #[test]
+    fn linear_force_map_matches_the_solve_at_small_strain() {
+        use crate::dataset::TopSurface;
+        let mesh = ocm_fem::mesh::generate::box_mesh([12, 8, 4], [6e-3, 4e-3, 2e-3]);
+        let gel = Gel::from_mesh(mesh, GelMaterial::default(), 1e-9).unwrap();
+        let lin = LinearForceMap::new(&gel).unwrap();
+        let model = SurfaceForceModel::new(&gel).unwrap();
+        let rest = TopSurface::from_gel(&gel).rest_m;
+        assert_eq!(lin.top_nodes(), rest.len());
+        let cap = |depth: f64| -> Vec<f64> {
+            rest.iter()
+                .map(|p| {
+                    let r2 = (p[0] - 3e-3).powi(2) + (p[1] - 2e-3).powi(2);
+                    -depth * (1.0 - r2 / 1.6e-3f64.powi(2)).max(0.0)
+                })
+                .collect()
+        };
+        let mut cmax = 0.0f64;
+        for k in 0..lin.top_nodes() {
+            for l in 0..lin.top_nodes() {
+                cmax = cmax.max(lin.compliance(k, l).abs());
+            }
+        }
+        for k in 0..lin.top_nodes() {
+            for l in 0..k {
+                assert!((lin.compliance(k, l) - lin.compliance(l, k)).abs() < 1e-8 * cmax);
+            }
+        }
+        for (depth, tol) in [(2e-6, 2e-3), (100e-6, 0.05)] {
+            let u = cap(depth);
+            let thr = 0.1 * depth;
+            let f_lin = lin.force(&u, thr).unwrap();
+            let full: Vec<[f64; 3]> = u.iter().map(|&z| [0.0, 0.0, z]).collect();
+            let nl = model
+                .solve(&full, Prescribe::ContactZ { threshold_m: thr })
+                .unwrap();
+            let (patch, w) = lin.patch_weights(&u, thr).unwrap();
+            println!(
+                "cap {depth:e} m: linear {f_lin:.6e} N, Newton {:.6e} N on {} nodes",
+                nl.total_reaction_n,
+                patch.len()
+            );
+            assert_eq!(patch, nl.patch);
+            assert!(f_lin > 0.0);
+            assert!(
+                (f_lin - nl.total_reaction_n).abs() < tol * nl.total_reaction_n,
+                "{f_lin} vs {}",
+                nl.total_reaction_n
+            );
+            // Linear in u for a fixed patch, every weight pushing the same way.
+            assert!(w.iter().sum::<f64>() > 0.0);
+            let doubled: Vec<f64> = u.iter().map(|v| 2.0 * v).collect();
+            assert!((lin.force(&doubled, 2.0 * thr).unwrap() - 2.0 * f_lin).abs() < 1e-9 * f_lin);
+        }
+        // Pixel weights: an image field resampled onto the nodes has the force -sum W v.
+        let (rows, cols) = (24, 36);
+        let map = crate::optics::CameraMap {
+            px_per_m: 6_000.0,
+            angle_rad: 0.0,
+            mirror: false,
+            offset_px: [0.0, 0.0],
+        };
+        let to_mesh = crate::optics::GridToMesh::new(&rest, rows, cols, &map).unwrap();
+        let img: Vec<f32> = (0..rows * cols)
+            .map(|i| {
+                let (r, c) = ((i / cols) as f64 + 0.5, (i % cols) as f64 + 0.5);
+                let r2 = ((c - 18.0).powi(2) + (r - 12.0).powi(2)) / 81.0;
+                (-80e-6 * (1.0 - r2).max(0.0)) as f32
+            })
+            .collect();
+        let wpix = lin.pixel_weights(&to_mesh, &img, 30e-6).unwrap();
+        let via_pixels = -wpix
+            .iter()
+            .zip(&img)
+            .map(|(w, v)| f64::from(*w) * f64::from(*v))
+            .sum::<f64>();
+        let on_nodes = lin.force(&to_mesh.sample(&img).unwrap(), 30e-6).unwrap();
+        assert!(on_nodes > 0.0);
+        assert!(
+            (via_pixels - on_nodes).abs() < 1e-5 * on_nodes,
+            "{via_pixels} vs {on_nodes}"
+        );
+        assert!(lin.force(&cap(1e-6)[1..], 0.0).is_err());
+        let mut bad = cap(1e-6);
+        bad[3] = f64::NAN;
+        assert!(lin.force(&bad, 0.0).is_err());
     }
 
     /// A sphere pressed into a block by the contact FEM (frictionless): its top-face field put

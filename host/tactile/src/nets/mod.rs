@@ -183,6 +183,14 @@ pub struct NetData {
     /// soft mask being the sigmoid of the same logit as the mask term, averaged over samples);
     /// 0 leaves it out. Unlike the pixel-averaged terms it weighs a small contact like a large one.
     pub iou_loss_weight: f32,
+    /// Weight of the perception network's surface-force term, 1/N^2 (set with
+    /// [`NetData::set_force_loss`]): the mean over samples of the squared force of the depth
+    /// error, (sum W (dz_pred - dz_true))^2 in N^2, W the target's pixel weights; 0 leaves it out.
+    force_loss_weight: f32,
+    /// Per sample `[rows, cols]`, N/m: the linear surface force of a field with the target's
+    /// contact patch is -sum W u_z ([`force::LinearForceMap::pixel_weights`]); empty unless the
+    /// force term is used.
+    force_weight: Vec<f32>,
     coords: Vec<f32>,
 }
 
@@ -209,6 +217,8 @@ impl NetData {
                     .collect(),
                 mask_loss_weight: 0.0,
                 iou_loss_weight: 0.0,
+                force_loss_weight: 0.0,
+                force_weight: Vec::new(),
                 coords: Vec::new(),
             },
             NetKind::Rendering => NetData {
@@ -236,9 +246,53 @@ impl NetData {
                     .collect(),
                 mask_loss_weight: 0.0,
                 iou_loss_weight: 0.0,
+                force_loss_weight: 0.0,
+                force_weight: Vec::new(),
                 coords: coordinate_channels(p.rows, p.cols),
             },
         }
+    }
+
+    /// Adds the surface-force term at `weight` (1/N^2) with per-sample pixel weights
+    /// `pixel_weights` (`[rows, cols]` per sample, N/m, from
+    /// [`force::LinearForceMap::pixel_weights`] on each sample's own target field); an error
+    /// for the rendering network, a weight that is not finite and >= 0, or weights of another
+    /// size or not finite.
+    pub fn set_force_loss(&mut self, weight: f32, pixel_weights: Vec<f32>) -> Result<()> {
+        let n = self.rows * self.cols;
+        if self.kind != NetKind::Perception {
+            return Err(TactileError::Input(
+                "the surface-force term is for the perception network".into(),
+            ));
+        }
+        if !(weight.is_finite() && weight >= 0.0) {
+            return Err(TactileError::Input(format!(
+                "surface-force loss weight {weight}: expected a finite value >= 0"
+            )));
+        }
+        if pixel_weights.len() != self.len() * n {
+            return Err(TactileError::Input(format!(
+                "{} force weights for {} samples of {n} pixels",
+                pixel_weights.len(),
+                self.len()
+            )));
+        }
+        if let Some(i) = pixel_weights.iter().position(|v| !v.is_finite()) {
+            return Err(TactileError::Input(format!(
+                "force weight of sample {} at pixel {} is {}",
+                i / n,
+                i % n,
+                pixel_weights[i]
+            )));
+        }
+        self.force_loss_weight = weight;
+        self.force_weight = pixel_weights;
+        Ok(())
+    }
+
+    /// Weight of the surface-force term (0 when it is not used), 1/N^2.
+    pub fn force_loss_weight(&self) -> f32 {
+        self.force_loss_weight
     }
 
     /// Number of samples.
@@ -308,13 +362,21 @@ impl NetData {
         match self.kind {
             NetKind::Perception => {
                 let dz = out.narrow(1, 2, 1);
-                let mse = (dz.clone() - target).powi_scalar(2).mean();
+                let err = dz.clone() - target;
+                let mut loss = err.clone().powi_scalar(2).mean();
+                if self.force_loss_weight > 0.0 {
+                    let w = self.rows_of(&self.force_weight, n, target_idx, 1, device);
+                    // Normalised dz back to metres: the offset cancels in the difference.
+                    let scale = (DZ_MAX_M - DZ_MIN_M) as f32;
+                    let force_err = (err * w).sum_dim(3).sum_dim(2).mul_scalar(scale);
+                    let term = force_err.powi_scalar(2).mean();
+                    loss = loss + term.mul_scalar(self.force_loss_weight);
+                }
                 if self.mask_loss_weight <= 0.0 && self.iou_loss_weight <= 0.0 {
-                    return mse;
+                    return loss;
                 }
                 let m = self.rows_of(&self.mask, n, target_idx, 1, device);
                 let z = dz.neg().add_scalar(1.0).div_scalar(MASK_LOGIT_WIDTH);
-                let mut loss = mse;
                 if self.iou_loss_weight > 0.0 {
                     let p = activation::sigmoid(z.clone());
                     let inter = (p.clone() * m.clone()).sum_dim(3).sum_dim(2);

@@ -187,6 +187,15 @@ pub struct RealFrameScore {
     pub iou: f64,
     /// Centroid distance on the gel, mm (NaN when a mask is empty).
     pub centroid_mm: f64,
+    /// Predicted minus measured centroid along the camera image's columns and rows, mm on the
+    /// gel (NaN when a mask is empty): a constant offset over the frames is a registration
+    /// error, a varying one a shape error.
+    #[serde(default)]
+    pub centroid_offset_mm: [f64; 2],
+    /// Shift (columns, rows) applied to the predicted mask in the camera image, pixels
+    /// ([`RealOptions::shift_fit`]; zero without).
+    #[serde(default)]
+    pub applied_shift_px: [i64; 2],
     /// Angle between the principal axes, rad (NaN when a mask is empty).
     pub rotation_rad: f64,
     /// Elongation of the measured mask ([`super::elongation`]).
@@ -220,6 +229,10 @@ pub struct RealOptions {
     pub mask: MaskOptions,
     /// Indentation per real frame, m.
     pub step_m: f64,
+    /// Shift every predicted mask in the camera image by the mean predicted-minus-measured
+    /// centroid offset over the even frames (a registration of the network's path fitted on
+    /// half the depths; the odd frames are the score).
+    pub shift_fit: bool,
 }
 
 impl Default for RealOptions {
@@ -230,6 +243,7 @@ impl Default for RealOptions {
             remove_drift: true,
             mask: MaskOptions::default(),
             step_m: 10e-6,
+            shift_fit: false,
         }
     }
 }
@@ -331,11 +345,9 @@ pub fn perceive_real(
     let pred = data.predict(net, &idx, 8, device);
     let px_per_m = fitted.map.px_per_m;
     let area = |m: &Mask| m.count() as f64 / (px_per_m * px_per_m) * 1e6;
-    let mut out = Vec::new();
+    let mut masks = Vec::new();
     for (j, f) in frames[1..].iter().enumerate() {
-        let frame = j + 1;
-        let dz = &pred[j * n..(j + 1) * n];
-        let small = contact_mask(grid, dz);
+        let small = contact_mask(grid, &pred[j * n..(j + 1) * n]);
         let predicted = warp_mask_between(&small, &small_map, &fitted.map, r0, c0)
             .closed(CLOSING_KERNEL_PX)
             .filled();
@@ -343,12 +355,34 @@ pub fn perceive_real(
         if measured.count() == 0 && predicted.count() == 0 {
             continue;
         }
+        masks.push((j + 1, predicted, measured));
+    }
+    let shift = if opts.shift_fit {
+        fit_shift(&masks)?
+    } else {
+        [0, 0]
+    };
+    let mut out = Vec::new();
+    for (frame, predicted, measured) in masks {
+        let j = frame - 1;
+        let dz = &pred[j * n..(j + 1) * n];
+        let predicted = shift_mask(&predicted, shift);
         let (iou, cen, rot) = real::score_masks(&measured, &predicted, px_per_m)?;
         let empty = measured.count() == 0 || predicted.count() == 0;
+        let (sm, sp) = (measured.stats(), predicted.stats());
+        let offset = |k: usize| {
+            if empty {
+                f64::NAN
+            } else {
+                (sp.centroid_m[k] - sm.centroid_m[k]) / px_per_m * 1e3
+            }
+        };
         out.push(RealFrameScore {
             frame,
             iou,
             centroid_mm: if empty { f64::NAN } else { cen },
+            centroid_offset_mm: [offset(0), offset(1)],
+            applied_shift_px: shift,
             rotation_rad: if empty { f64::NAN } else { rot },
             real_elongation: elongation(&measured),
             real_area_mm2: area(&measured),
@@ -362,9 +396,72 @@ pub fn perceive_real(
     Ok((out, pred))
 }
 
+/// The whole-pixel shift (columns, rows) that moves the predicted masks onto the measured ones
+/// on average over the even frames of `masks` (frame, predicted, measured) where both have
+/// contact: minus the mean centroid offset, rounded.
+pub fn fit_shift(masks: &[(usize, Mask, Mask)]) -> Result<[i64; 2]> {
+    let (mut sum, mut count) = ([0.0f64; 2], 0usize);
+    for (frame, p, m) in masks {
+        if frame % 2 == 0 && p.count() > 0 && m.count() > 0 {
+            let (sp, sm) = (p.stats(), m.stats());
+            for k in 0..2 {
+                sum[k] += (sp.centroid_m[k] - sm.centroid_m[k]) / p.grid.pixel_m;
+            }
+            count += 1;
+        }
+    }
+    if count == 0 {
+        return Err(TactileError::Input(
+            "no even frame with contact in both masks to fit the shift on".into(),
+        ));
+    }
+    Ok(sum.map(|v| -(v / count as f64).round() as i64))
+}
+
+/// `mask` moved by `shift` (columns, rows) whole pixels; what leaves the grid is dropped.
+pub fn shift_mask(mask: &Mask, shift: [i64; 2]) -> Mask {
+    let g = mask.grid;
+    mask_from_fn(g, |r, c| {
+        let (sr, sc) = (r as i64 - shift[1], c as i64 - shift[0]);
+        sr >= 0
+            && sc >= 0
+            && (sr as usize) < g.rows
+            && (sc as usize) < g.cols
+            && mask.pixels[sr as usize * g.cols + sc as usize]
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fitted shift is minus the even frames' mean centroid offset and moves those masks
+    /// onto the measured ones exactly.
+    #[test]
+    fn shift_fit_registers_offset_masks_on_even_frames() {
+        let g = real::image_grid(40, 50);
+        let disc = |r0: f64, c0: f64, rad: f64| {
+            mask_from_fn(g, move |r, c| {
+                (r as f64 - r0).powi(2) + (c as f64 - c0).powi(2) < rad * rad
+            })
+        };
+        // Predicted discs 5 columns right and 3 rows up of the measured ones on the even
+        // frames; an odd frame far off must not enter the fit.
+        let masks = vec![
+            (2, disc(20.0, 25.0, 6.0), disc(23.0, 20.0, 6.0)),
+            (4, disc(18.0, 27.0, 8.0), disc(21.0, 22.0, 8.0)),
+            (5, disc(5.0, 5.0, 3.0), disc(35.0, 45.0, 3.0)),
+        ];
+        let s = fit_shift(&masks).unwrap();
+        assert_eq!(s, [-5, 3]);
+        for (_, p, m) in &masks[..2] {
+            let moved = shift_mask(p, s);
+            assert_eq!(moved.pixels, m.pixels);
+        }
+        // Moved off the grid: nothing left; no even frame with both masks: an error.
+        assert_eq!(shift_mask(&masks[0].1, [100, 0]).count(), 0);
+        assert!(fit_shift(&masks[2..]).is_err());
+    }
 
     /// Warping an image into another map and back reproduces it where both cover the gel, and
     /// a mask warped through the identity is unchanged.

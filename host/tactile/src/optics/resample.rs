@@ -90,6 +90,25 @@ impl GridToMesh {
             .collect())
     }
 
+    /// The adjoint of [`GridToMesh::sample`]: per-point weights `point_w` spread onto the pixels
+    /// through the same bilinear taps, so that `sum(scatter(w) * field) = sum(w * sample(field))`.
+    pub fn scatter(&self, point_w: &[f64]) -> Result<Vec<f64>> {
+        if point_w.len() != self.taps.len() {
+            return Err(TactileError::Input(format!(
+                "{} point weights for a resampler of {} points",
+                point_w.len(),
+                self.taps.len()
+            )));
+        }
+        let mut out = vec![0.0; self.rows * self.cols];
+        for (t, &w) in self.taps.iter().zip(point_w) {
+            for &(k, f) in t {
+                out[k as usize] += f64::from(f) * w;
+            }
+        }
+        Ok(out)
+    }
+
     /// Nodal displacement (m) from surface heights towards the camera `height_m` per pixel:
     /// u = (0, 0, -h). The image carries no lateral displacement, so u_x = u_y = 0.
     pub fn displacement(&self, height_m: &[f32]) -> Result<Vec<[f64; 3]>> {
@@ -150,5 +169,46 @@ mod tests {
         let e = g.sample(&bad).unwrap_err().to_string();
         assert!(e.contains("row 1, col 6"), "{e}");
         assert!(GridToMesh::new(&[[f64::NAN, 0.0, 0.0]], rows, cols, &m).is_err());
+    }
+
+    /// `scatter` is the transpose of `sample`: <scatter(w), f> = <w, sample(f)> for arbitrary
+    /// w and f, and the weights of a point inside the grid sum to its own weight.
+    #[test]
+    fn scatter_is_the_adjoint_of_sample() {
+        let (rows, cols) = (20, 30);
+        let m = map();
+        let pts: Vec<[f64; 3]> = (0..50)
+            .map(|k| {
+                let q = [
+                    (k as f64 * 0.618).fract() * cols as f64,
+                    (k as f64 * 0.382).fract() * rows as f64,
+                ];
+                let p = m.to_gel(q);
+                [p[0], p[1], 0.0]
+            })
+            .collect();
+        let g = GridToMesh::new(&pts, rows, cols, &m).unwrap();
+        let field: Vec<f32> = (0..rows * cols)
+            .map(|i| ((i * 37 % 101) as f32 - 50.0) * 1e-3)
+            .collect();
+        let w: Vec<f64> = (0..pts.len()).map(|k| (k as f64 * 0.7).sin()).collect();
+        let lhs: f64 = g
+            .scatter(&w)
+            .unwrap()
+            .iter()
+            .zip(&field)
+            .map(|(a, b)| a * f64::from(*b))
+            .sum();
+        let rhs: f64 = g
+            .sample(&field)
+            .unwrap()
+            .iter()
+            .zip(&w)
+            .map(|(a, b)| a * b)
+            .sum();
+        assert!((lhs - rhs).abs() < 1e-9, "{lhs} vs {rhs}");
+        let one = g.scatter(&[0.0; 50].map(|_: f64| 1.0)).unwrap();
+        assert!((one.iter().sum::<f64>() - 50.0).abs() < 1e-5);
+        assert!(g.scatter(&w[1..]).is_err());
     }
 }
