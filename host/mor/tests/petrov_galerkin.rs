@@ -4,37 +4,13 @@
 
 mod common;
 
-use common::{block, full_basis, input};
-use faer::Mat;
-use nalgebra::{DMatrix, DVector};
-use ocm_fem::model::{Loads, State};
-use ocm_fem::solve::dynamics::{DynamicSolver, Integrator};
-use ocm_mor::full::tip_point_forces;
+use common::{block, full_basis, full_run, input, pod_basis};
+use nalgebra::DVector;
+use ocm_fem::solve::dynamics::Integrator;
 use ocm_mor::modes::step_test_basis;
-use ocm_mor::pod::{PodOptions, Truncation, pod};
 use ocm_mor::rom::ReducedModel;
 
 const H: f64 = 0.01;
-
-/// Full backward-Euler steps of the block under `inputs` from rest; displacements after each.
-fn full_run(b: &common::Block, inputs: &[ocm_mor::drive::Input]) -> Vec<Vec<f64>> {
-    let mut model = b.model.clone();
-    let mut solver = DynamicSolver::new(&model, Integrator::ImplicitEuler).unwrap();
-    solver.options.rtol = 1e-12;
-    let mut s = State::at_rest(&model);
-    let rest = model.rest_dofs();
-    inputs
-        .iter()
-        .map(|inp| {
-            model.point_forces = tip_point_forces(&b.tip, inp.tip_force_n);
-            let loads = Loads {
-                pressures_pa: vec![inp.pressure_kpa[0] * 1e3],
-            };
-            solver.step(&model, &mut s, &loads, H).unwrap();
-            s.x.iter().zip(&rest).map(|(x, r)| x - r).collect()
-        })
-        .collect()
-}
 
 fn reduced_run(rom: &ReducedModel, inputs: &[ocm_mor::drive::Input]) -> Vec<DVector<f64>> {
     let mut rs = rom.rest_state();
@@ -67,7 +43,7 @@ fn petrov_galerkin_with_the_full_basis_reproduces_the_full_model() {
             )
         })
         .collect();
-    let full = full_run(&b, &inputs);
+    let full = full_run(&b, H, &inputs);
     let red = reduced_run(&rom, &inputs);
     let (mut worst, mut largest) = (0.0f64, 0.0f64);
     for (uf, q) in full.iter().zip(&red) {
@@ -94,17 +70,8 @@ fn petrov_galerkin_step_is_the_projection_of_the_full_step_in_the_linear_range()
     let train: Vec<_> = (0..20)
         .map(|k| input(2.0 * (k as f64 / 10.0).min(1.0), [0.0, 0.2, 0.0]))
         .collect();
-    let snaps = full_run(&b, &train);
-    let a = Mat::<f64>::from_fn(snaps[0].len(), snaps.len(), |i, j| snaps[j][i]);
-    let p = pod(
-        a.as_ref(),
-        &PodOptions {
-            truncation: Truncation::Rank(3),
-            ..PodOptions::default()
-        },
-    )
-    .unwrap();
-    let v = DMatrix::from_fn(p.modes.nrows(), 3, |i, j| p.modes[(i, j)]);
+    let snaps = full_run(&b, H, &train);
+    let v = pod_basis(&snaps, 3);
     let w = step_test_basis(&b.model, &v, H).unwrap();
     let mut pg = ReducedModel::petrov_galerkin(&b.model, v.clone(), w, &b.tip).unwrap();
     let mut gal = ReducedModel::galerkin(&b.model, v.clone(), &b.tip).unwrap();
@@ -113,7 +80,7 @@ fn petrov_galerkin_step_is_the_projection_of_the_full_step_in_the_linear_range()
         m.damping_tangent_age = 1;
     }
     let step = [input(1e-4, [0.0, 0.0, -1e-4])];
-    let uf = DVector::from_vec(full_run(&b, &step).remove(0));
+    let uf = DVector::from_vec(full_run(&b, H, &step).remove(0));
     let qp = v.transpose() * &uf;
     let e_pg = (&reduced_run(&pg, &step)[0] - &qp).norm() / qp.norm();
     let e_gal = (&reduced_run(&gal, &step)[0] - &qp).norm() / qp.norm();

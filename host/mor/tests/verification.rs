@@ -2,13 +2,11 @@
 
 mod common;
 
-use common::{block, full_basis, input};
-use faer::Mat;
-use nalgebra::{DMatrix, DVector};
+use common::{block, full_basis, input, pod_basis};
+use nalgebra::DVector;
 use ocm_fem::model::{Loads, State};
 use ocm_fem::solve::dynamics::{DynamicSolver, Integrator};
 use ocm_mor::full::tip_point_forces;
-use ocm_mor::pod::{PodOptions, Truncation, pod};
 use ocm_mor::rom::ReducedModel;
 
 /// Displacement snapshots of the full block under a pressure ramp and a tip force.
@@ -35,19 +33,6 @@ fn snapshots(b: &common::Block) -> Vec<Vec<f64>> {
         out.push(s.x.iter().zip(&rest).map(|(x, r)| x - r).collect());
     }
     out
-}
-
-fn pod_basis(snaps: &[Vec<f64>], r: usize) -> DMatrix<f64> {
-    let a = Mat::<f64>::from_fn(snaps[0].len(), snaps.len(), |i, j| snaps[j][i]);
-    let p = pod(
-        a.as_ref(),
-        &PodOptions {
-            truncation: Truncation::Rank(r),
-            ..PodOptions::default()
-        },
-    )
-    .unwrap();
-    DMatrix::from_fn(p.modes.nrows(), r, |i, j| p.modes[(i, j)])
 }
 
 #[test]

@@ -1,10 +1,18 @@
 //! A small clamped block with a pressurised face: a real FE model that solves in milliseconds.
 
+// Each test file compiles this module on its own and uses a part of it.
+#![allow(dead_code)]
+
+use faer::Mat;
 use nalgebra::DMatrix;
 use ocm_fem::material::Material;
 use ocm_fem::mesh::generate;
 use ocm_fem::model::Model;
+use ocm_fem::model::{Loads, State};
+use ocm_fem::solve::dynamics::{DynamicSolver, Integrator};
 use ocm_mor::drive::Input;
+use ocm_mor::full::tip_point_forces;
+use ocm_mor::pod::{PodOptions, Truncation, pod};
 
 /// The block model and its free-end nodes.
 pub struct Block {
@@ -59,4 +67,39 @@ pub fn input(p_kpa: f64, f: [f64; 3]) -> Input {
         pressure_kpa: [p_kpa, 0.0, 0.0],
         tip_force_n: f,
     }
+}
+
+/// Full backward-Euler steps of the block under `inputs` from rest, `h` seconds each, solved to
+/// 1e-12; the displacements after each step.
+pub fn full_run(b: &Block, h: f64, inputs: &[Input]) -> Vec<Vec<f64>> {
+    let mut model = b.model.clone();
+    let mut solver = DynamicSolver::new(&model, Integrator::ImplicitEuler).unwrap();
+    solver.options.rtol = 1e-12;
+    let mut s = State::at_rest(&model);
+    let rest = model.rest_dofs();
+    inputs
+        .iter()
+        .map(|inp| {
+            model.point_forces = tip_point_forces(&b.tip, inp.tip_force_n);
+            let loads = Loads {
+                pressures_pa: vec![inp.pressure_kpa[0] * 1e3],
+            };
+            solver.step(&model, &mut s, &loads, h).unwrap();
+            s.x.iter().zip(&rest).map(|(x, r)| x - r).collect()
+        })
+        .collect()
+}
+
+/// The rank-`r` POD basis of displacement snapshots (one per entry).
+pub fn pod_basis(snaps: &[Vec<f64>], r: usize) -> DMatrix<f64> {
+    let a = Mat::<f64>::from_fn(snaps[0].len(), snaps.len(), |i, j| snaps[j][i]);
+    let p = pod(
+        a.as_ref(),
+        &PodOptions {
+            truncation: Truncation::Rank(r),
+            ..PodOptions::default()
+        },
+    )
+    .unwrap();
+    DMatrix::from_fn(p.modes.nrows(), r, |i, j| p.modes[(i, j)])
 }
