@@ -22,7 +22,7 @@
 //! the training range, is refused as unstable.
 
 use crate::drive::Input;
-use crate::rom::ReducedStepReport;
+use crate::rom::{ReducedStepReport, dot};
 use crate::run::ReducedRun;
 use crate::store::{ReducedProbe, basis_hash};
 use crate::{MorError, Result, sha256_f64};
@@ -682,19 +682,6 @@ impl OpInfModel {
             report: ReducedStepReport::default(),
         })
     }
-}
-
-/// Dot product with four partial sums (a single running sum is bound by the add latency).
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() - a.len() % 4;
-    let mut acc = [0.0; 4];
-    for (x, y) in a[..n].chunks_exact(4).zip(b[..n].chunks_exact(4)) {
-        for l in 0..4 {
-            acc[l] += x[l] * y[l];
-        }
-    }
-    let tail: f64 = a[n..].iter().zip(&b[n..]).map(|(x, y)| x * y).sum();
-    acc[0] + acc[1] + acc[2] + acc[3] + tail
 }
 
 /// Largest |q_i| over `trajs`, times [`BLOW_UP_FACTOR`].

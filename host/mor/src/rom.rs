@@ -188,7 +188,7 @@ pub fn body_elements(model: &Model) -> Vec<usize> {
 
 /// Dot product with eight independent partial sums: a single running sum is a chain of dependent
 /// additions that the compiler may not reorder, bound by the add latency instead of throughput.
-fn dot(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
     let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
     let mut s: f64 = ca
         .remainder()

@@ -103,16 +103,7 @@ fn held_out_ratio_with(kind: NetKind, shuffle: Option<u64>, mask_weight: f32) ->
     };
     let cfg = small(kind);
     let net = cfg.init(&cpu_autodiff(), 11).unwrap();
-    let tc = TrainConfig {
-        epochs: 40,
-        batch_size: 8,
-        learning_rate: 3e-3,
-        val_fraction: 0.0,
-        patience: 0,
-        grad_clip_norm: None,
-        seed: 5,
-        progress: false,
-    };
+    let tc = smoke_config(40, 8);
     let report = nets::train(&data, net, &split, &tc, shuffle).unwrap();
     let first = report.curve[0].train_loss;
     data.mask_loss_weight = 0.0;
@@ -221,16 +212,7 @@ fn iou_loss_is_the_per_sample_soft_jaccard() {
         train: (6..14).collect(),
         val: (0..6).collect(),
     };
-    let tc = TrainConfig {
-        epochs: 5,
-        batch_size: 4,
-        learning_rate: 3e-3,
-        val_fraction: 0.0,
-        patience: 0,
-        grad_clip_norm: None,
-        seed: 5,
-        progress: false,
-    };
+    let tc = smoke_config(5, 4);
     let init = small(NetKind::Perception).init(&cpu_autodiff(), 3).unwrap();
     let net = nets::train(&data, init, &split, &tc, None).unwrap().model;
     let idx: Vec<usize> = (0..6).collect();
@@ -281,16 +263,7 @@ fn perception_with_iou_loss_learns_and_fails_on_shuffled_targets() {
         let net = small(NetKind::Perception)
             .init(&cpu_autodiff(), 11)
             .unwrap();
-        let tc = TrainConfig {
-            epochs: 40,
-            batch_size: 8,
-            learning_rate: 3e-3,
-            val_fraction: 0.0,
-            patience: 0,
-            grad_clip_norm: None,
-            seed: 5,
-            progress: false,
-        };
+        let tc = smoke_config(40, 8);
         let report = nets::train(&data, net, &split, &tc, shuffle).unwrap();
         let pred = data.predict(&report.model, &split.val, 8, &cpu());
         let s = nets::score_predicted(&pred, &pairs, &split.val, nets::CONTACT_DZ_M, 1.0).unwrap();
@@ -432,16 +405,7 @@ fn perception_with_force_loss_learns_and_fails_on_shuffled_targets() {
         let net = small(NetKind::Perception)
             .init(&cpu_autodiff(), 11)
             .unwrap();
-        let tc = TrainConfig {
-            epochs: 40,
-            batch_size: 8,
-            learning_rate: 3e-3,
-            val_fraction: 0.0,
-            patience: 0,
-            grad_clip_norm: None,
-            seed: 5,
-            progress: false,
-        };
+        let tc = smoke_config(40, 8);
         let report = nets::train(&data, net, &split, &tc, shuffle).unwrap();
         let pred = data.predict(&report.model, &split.val, 8, &cpu());
         rmse(&|k| force(&pred[k * n..(k + 1) * n]).unwrap())
@@ -539,4 +503,18 @@ fn wrong_images_are_refused() {
     let e = RgbImage::read(&p).unwrap_err().to_string();
     assert!(e.contains("1 channel"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The smoke runs' training settings: fixed epochs, no validation split or early stop, seed 5.
+fn smoke_config(epochs: usize, batch_size: usize) -> TrainConfig {
+    TrainConfig {
+        epochs,
+        batch_size,
+        learning_rate: 3e-3,
+        val_fraction: 0.0,
+        patience: 0,
+        grad_clip_norm: None,
+        seed: 5,
+        progress: false,
+    }
 }
