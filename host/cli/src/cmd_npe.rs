@@ -159,11 +159,11 @@ fn load_with_data(
 
 fn write_scores_csv(path: &Path, per: &[SampleScore]) -> anyhow::Result<()> {
     let mut s = String::from(
-        "setup,depth_mm,contact_accuracy,rmse_mm,orientation_deg,force_pred_n,force_fem_n,force_off_contact_n\n",
+        "setup,depth_mm,contact_accuracy,rmse_mm,orientation_deg,force_pred_n,force_fem_n,force_off_contact_n,elongation_fem,elongation_pred,mask_px_fem,mask_px_pred\n",
     );
     for r in per {
         s.push_str(&format!(
-            "{},{:.3},{:.5},{:.5},{},{:.5},{:.5},{:.5}\n",
+            "{},{:.3},{:.5},{:.5},{},{:.5},{:.5},{:.5},{},{},{},{}\n",
             r.setup,
             r.depth_mm,
             r.contact_accuracy,
@@ -172,7 +172,13 @@ fn write_scores_csv(path: &Path, per: &[SampleScore]) -> anyhow::Result<()> {
                 .map_or(String::new(), |v| format!("{v:.4}")),
             r.force_pred_n,
             r.force_fem_n,
-            r.force_off_contact_n
+            r.force_off_contact_n,
+            r.elongation_fem
+                .map_or(String::new(), |v| format!("{v:.4}")),
+            r.elongation_pred
+                .map_or(String::new(), |v| format!("{v:.4}")),
+            r.mask_pixels[0],
+            r.mask_pixels[1]
         ));
     }
     std::fs::write(path, s).with_context(|| format!("writing {}", path.display()))

@@ -1123,6 +1123,10 @@ pub struct ReduceArgs {
     /// Linearisation passes per reduced frame (default: the reduced options').
     #[arg(long)]
     passes: Option<usize>,
+    /// Hold the contact's area-weighted mean gap at zero by a uniform pressure multiplier on
+    /// top of the per-node penalty.
+    #[arg(long)]
+    hold_mean_gap: bool,
     /// Timed repeats of each held-out sequence.
     #[arg(long, default_value_t = 5)]
     repeats: usize,
@@ -1391,6 +1395,7 @@ fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
             if let Some(p) = a.passes {
                 opts.max_passes = p;
             }
+            opts.hold_mean_gap = a.hold_mean_gap;
             let ecsw = if a.nonlinear {
                 Some(pool.install(|| reduce_ecsw(&a, &gel, &digit, &all, &folders, &m, enrich))?)
             } else {
@@ -1420,6 +1425,7 @@ fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
                 "rank": r,
                 "enriched": a.enrich,
                 "enrich_loads": if a.enrich { loads.clone() } else { Vec::new() },
+                "hold_mean_gap": a.hold_mean_gap,
                 "nonlinear": ecsw.as_ref().map(|(_, info)| info.clone()),
                 "frames": frames,
                 "frames_per_s_median": median(&fps),

@@ -53,9 +53,34 @@ pub fn fit(columns: &[&[f64]], target: &[f64], mask: &[bool], nonneg: &[bool]) -
     let mut g = DMatrix::<f64>::zeros(p, p);
     let mut b = DVector::<f64>::zeros(p);
     for a in 0..p {
-        b[a] = dot(&gathered[a], &t);
-        for c in a..p {
-            let s = dot(&gathered[a], &gathered[c]);
+        let xa = &gathered[a];
+        b[a] = dot(xa, &t);
+        // Four products at a time: each still sums its rows in order (bit for bit the plain
+        // loop), but four independent sums keep the floating-point adder busy, where one sum
+        // waits on its own last addition.
+        let mut c = a;
+        while c + 4 <= p {
+            let (y0, y1, y2, y3) = (
+                &gathered[c],
+                &gathered[c + 1],
+                &gathered[c + 2],
+                &gathered[c + 3],
+            );
+            let (mut s0, mut s1, mut s2, mut s3) = (0.0, 0.0, 0.0, 0.0);
+            for ((((x, v0), v1), v2), v3) in xa.iter().zip(y0).zip(y1).zip(y2).zip(y3) {
+                s0 += x * v0;
+                s1 += x * v1;
+                s2 += x * v2;
+                s3 += x * v3;
+            }
+            for (k, s) in [s0, s1, s2, s3].into_iter().enumerate() {
+                g[(a, c + k)] = s;
+                g[(c + k, a)] = s;
+            }
+            c += 4;
+        }
+        for c in c..p {
+            let s = dot(xa, &gathered[c]);
             g[(a, c)] = s;
             g[(c, a)] = s;
         }

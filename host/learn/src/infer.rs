@@ -78,6 +78,8 @@ impl DenseLayer {
     pub fn forward_rows(&self, x: &[f32], rows: usize, out: &mut Vec<f32>) {
         debug_assert_eq!(x.len(), rows * self.input);
         out.clear();
+        // Reserved up front: growing the buffer row by row was a tenth of an NPE call.
+        out.reserve(rows * self.output);
         for _ in 0..rows {
             out.extend_from_slice(&self.bias);
         }
@@ -127,11 +129,16 @@ impl DenseMlp {
 
     /// Maps `rows` row-major inputs to `[rows, output]`.
     pub fn forward_rows(&self, x: &[f32], rows: usize) -> Vec<f32> {
-        let mut cur = x.to_vec();
+        if self.layers.is_empty() {
+            return x.to_vec();
+        }
+        let mut cur = Vec::new();
         let mut next = Vec::new();
-        let last = self.layers.len().saturating_sub(1);
+        let last = self.layers.len() - 1;
         for (i, l) in self.layers.iter().enumerate() {
-            l.forward_rows(&cur, rows, &mut next);
+            // The first layer reads the caller's rows directly instead of a copy of them.
+            let input: &[f32] = if i == 0 { x } else { &cur };
+            l.forward_rows(input, rows, &mut next);
             if i < last {
                 self.activation.apply_slice(&mut next);
             }

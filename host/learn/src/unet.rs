@@ -114,13 +114,21 @@ impl UNetConfig {
 /// Convolution 3 x 3, normalisation, nonlinearity.
 #[derive(Module, Debug)]
 pub struct ConvBlock {
-    conv: Conv2d,
-    batch: Option<BatchNorm>,
-    group: Option<GroupNorm>,
+    /// The 3 x 3 convolution (padding 1).
+    pub conv: Conv2d,
+    /// Batch normalisation, when the network uses it.
+    pub batch: Option<BatchNorm>,
+    /// Group normalisation, when the network uses it.
+    pub group: Option<GroupNorm>,
     activation: usize,
 }
 
 impl ConvBlock {
+    /// The nonlinearity after the normalisation.
+    pub fn activation(&self) -> Activation {
+        Activation::from_code(self.activation)
+    }
+
     /// Applies the block to `[batch, channels, height, width]`.
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let x = self.conv.forward(x);

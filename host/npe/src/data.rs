@@ -22,7 +22,10 @@ pub struct NodeLocator {
     cell: f64,
     cols: usize,
     rows: usize,
-    buckets: Vec<Vec<usize>>,
+    /// Nodes of bucket `b`: `nodes[offsets[b]..offsets[b + 1]]`, in node order (one flat
+    /// array: a call visits up to 25 buckets per point).
+    offsets: Vec<usize>,
+    nodes: Vec<usize>,
 }
 
 impl NodeLocator {
@@ -43,11 +46,24 @@ impl NodeLocator {
         }
         let cols = ((hi[0] - lo[0]) / cell).floor() as usize + 1;
         let rows = ((hi[1] - lo[1]) / cell).floor() as usize + 1;
-        let mut buckets = vec![Vec::new(); cols * rows];
-        for (i, p) in rest_m.iter().enumerate() {
+        let bucket = |p: &[f64; 3]| {
             let c = ((p[0] - lo[0]) / cell).floor() as usize;
             let r = ((p[1] - lo[1]) / cell).floor() as usize;
-            buckets[r.min(rows - 1) * cols + c.min(cols - 1)].push(i);
+            r.min(rows - 1) * cols + c.min(cols - 1)
+        };
+        let mut offsets = vec![0usize; cols * rows + 1];
+        for p in rest_m {
+            offsets[bucket(p) + 1] += 1;
+        }
+        for b in 0..cols * rows {
+            offsets[b + 1] += offsets[b];
+        }
+        let mut fill = offsets.clone();
+        let mut nodes = vec![0usize; rest_m.len()];
+        for (i, p) in rest_m.iter().enumerate() {
+            let b = bucket(p);
+            nodes[fill[b]] = i;
+            fill[b] += 1;
         }
         NodeLocator {
             rest_m: rest_m.to_vec(),
@@ -55,23 +71,41 @@ impl NodeLocator {
             cell,
             cols,
             rows,
-            buckets,
+            offsets,
+            nodes,
         }
+    }
+
+    /// The nodes of bucket (row `r`, column `c`).
+    fn bucket(&self, r: usize, c: usize) -> &[usize] {
+        let b = r * self.cols + c;
+        &self.nodes[self.offsets[b]..self.offsets[b + 1]]
+    }
+
+    /// Bucket rows and columns within one ring of the bucket holding (x, y), clipped to the
+    /// grid (empty ranges when none is within it).
+    fn ring(&self, x: f64, y: f64) -> (std::ops::Range<usize>, std::ops::Range<usize>) {
+        let span = |v: f64, k: usize, n: usize| {
+            let b = ((v - self.origin[k]) / self.cell).floor();
+            // b in [-1, n] has a neighbour on the grid; NaN and far values give an empty range.
+            if b >= -1.0 && b <= n as f64 {
+                let b = b as i64;
+                (b - 1).max(0) as usize..((b + 2) as usize).min(n)
+            } else {
+                0..0
+            }
+        };
+        (span(y, 1, self.rows), span(x, 0, self.cols))
     }
 
     /// The node nearest to (x, y) within about one bucket, if any.
     pub fn nearest(&self, x: f64, y: f64) -> Option<usize> {
-        let c = ((x - self.origin[0]) / self.cell).floor();
-        let r = ((y - self.origin[1]) / self.cell).floor();
+        let (rows, cols) = self.ring(x, y);
         let mut best: Option<(f64, usize)> = None;
-        for dr in -1..=1 {
-            for dc in -1..=1 {
-                let (rr, cc) = (r + f64::from(dr), c + f64::from(dc));
-                if rr < 0.0 || cc < 0.0 || rr >= self.rows as f64 || cc >= self.cols as f64 {
-                    continue;
-                }
-                for &i in &self.buckets[rr as usize * self.cols + cc as usize] {
-                    let p = self.rest_m[i];
+        for rr in rows {
+            for cc in cols.clone() {
+                for &i in self.bucket(rr, cc) {
+                    let p = &self.rest_m[i];
                     let d = (p[0] - x).powi(2) + (p[1] - y).powi(2);
                     if best.is_none_or(|(b, _)| d < b) {
                         best = Some((d, i));
@@ -135,7 +169,7 @@ impl NodeLocator {
             let (r0, r1) = (at(p[1] - h, 1).max(0), at(p[1] + h, 1).min(rows - 1));
             for rr in r0..=r1 {
                 for cc in c0..=c1 {
-                    for &i in &self.buckets[(rr * cols + cc) as usize] {
+                    for &i in self.bucket(rr as usize, cc as usize) {
                         let q = self.rest_m[i];
                         let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
                         offer(&mut best[i], d2, p[2]);

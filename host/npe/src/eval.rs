@@ -56,6 +56,15 @@ pub struct SampleScore {
     /// candidate threshold `t` of [`evaluate_with`] (the FEM's stays at 30 um).
     #[serde(default)]
     pub contact_accuracy_at: Vec<f64>,
+    /// Elongation ([`elongation`]) of the FEM's contact mask (None when empty or a line).
+    #[serde(default)]
+    pub elongation_fem: Option<f64>,
+    /// Elongation of the engine's contact mask (None when empty or a line).
+    #[serde(default)]
+    pub elongation_pred: Option<f64>,
+    /// Pixels of the FEM's and the engine's contact masks (the orientation's masks).
+    #[serde(default)]
+    pub mask_pixels: [usize; 2],
 }
 
 /// Where the contact-node errors of a sample sit.
@@ -335,7 +344,9 @@ pub fn evaluate_with(
                 &top.extend(&pred.displacement_m, gel.num_nodes()),
             );
             let mt = Mask::from_displacement(gel, &grid, &top.extend(&truth, gel.num_nodes()));
-            let orientation = (elongation(&mt) >= ELONGATION_MIN && mp.count() > 0)
+            let finite = |e: f64| e.is_finite().then_some(e);
+            let (elong_fem, elong_pred) = (elongation(&mt), elongation(&mp));
+            let orientation = (elong_fem >= ELONGATION_MIN && mp.count() > 0)
                 .then(|| rotation_error(mp.stats().angle_rad, mt.stats().angle_rad).to_degrees());
             per.push(SampleScore {
                 setup: p.setup_names[s.setup].clone(),
@@ -361,6 +372,9 @@ pub fn evaluate_with(
                             / n as f64
                     })
                     .collect(),
+                elongation_fem: finite(elong_fem),
+                elongation_pred: finite(elong_pred),
+                mask_pixels: [mt.count(), mp.count()],
             });
         }
     }

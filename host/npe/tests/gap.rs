@@ -248,3 +248,27 @@ fn configurations_without_the_gap_input_keep_their_layout() {
     narrow.width = 6;
     assert!(narrow.init(&cpu(), 0).is_err());
 }
+
+/// The bucketed nearest-node lookup behind the node's own penetration equals a brute-force
+/// search over every node (points at irrational offsets, so no two nodes tie), also for
+/// points just outside the face; a NaN coordinate finds no node.
+#[test]
+fn nearest_node_equals_brute_force() {
+    let s = fine_surface();
+    let loc = NodeLocator::new(&s.rest_m);
+    for k in 0..400 {
+        let t = f64::from(k);
+        // Spread over the 5 x 5 mm face and 0.1 mm beyond each edge.
+        let x = -0.1e-3 + 5.2e-3 * (t * 0.618_033_988_75).fract();
+        let y = -0.1e-3 + 5.2e-3 * (t * 0.414_213_562_37 + 0.1).fract();
+        let brute = (0..s.rest_m.len())
+            .min_by(|&a, &b| {
+                let d = |i: usize| (s.rest_m[i][0] - x).hypot(s.rest_m[i][1] - y);
+                d(a).total_cmp(&d(b))
+            })
+            .unwrap();
+        assert_eq!(loc.nearest(x, y), Some(brute), "point {k} ({x}, {y})");
+    }
+    assert_eq!(loc.nearest(f64::NAN, 1e-3), None);
+    assert_eq!(loc.nearest(1.0, 1e-3), None);
+}

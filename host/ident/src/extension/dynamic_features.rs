@@ -10,10 +10,18 @@ use crate::cause::Cause;
 use crate::signal;
 use crate::statespace::StateSpace;
 
+/// Half-width of dry friction's pre-sliding stop operator inside the dynamics, as a fraction of
+/// the output's range: the displacement over which a sticking contact's force builds up
+/// before it slides (micrometres in metal contacts, a fraction of a millimetre in seals; a
+/// few tenths of a percent of a stroke). It is also the narrowest hysteresis element: the two
+/// causes share it and differ in what they add to it, forces of the velocity (friction) or
+/// wider loops (hysteresis, 1.5-28 %); see the README.
+const PRESLIDING: f64 = 0.0025;
+
 /// A signal of the model's own output that enters the dynamics where an input force does;
 /// evaluated step by step, so that the in-loop fit ([`super::in_loop`]) can feed the extended
 /// model's output back into it.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) enum LoopSignal {
     /// Stop operator of half-width `r`, normalised: `(y - play_r(y)) / r` (an
     /// elastic-perfectly-plastic element; the weight is its force when sliding).
@@ -59,18 +67,40 @@ impl LoopSignal {
 }
 
 /// The factor that turns a dissipative signal into a force of non-negative weight acting at
-/// input `k`: `-sign(G_k)`, with `G_k` the baseline's static gain from input `k` to the output
-/// (`C (I - A)^-1 B_k + D_k`). A force opposing the output's motion enters against the
-/// direction in which that input moves the output. `None` when the gain is zero or not finite
-/// (the sign is unknown and the weight stays free).
-pub(super) fn restoring_sign(ss: &StateSpace, c_row: &[f64], d_k: f64, k: usize) -> Option<f64> {
+/// input `k`: `-sign(G_k)`, with `G_k` the direction in which that input moves the output. A
+/// force opposing the output's motion enters against it. `G_k` is the median of the
+/// baseline's step response from input `k` over the first `horizon` samples (a quarter of the
+/// record's longest trial), not its static gain `C (I - A)^-1 B_k + D_k`: that limit lies beyond the
+/// record, and a slow pole fitted from it does not pin it down. A chamber record's baseline had
+/// a pole at 0.99996 (a time constant of 240 s against a 20 s record) and a static gain of
+/// -2e-7 m/Pa, while its step response stayed between +3.6e-7 and +4.4e-7 over the record:
+/// every hysteresis weight stayed at the bound zero, and the fit with free signs explained
+/// 66 % of the error. Another chamber baseline had a pole at 1.004, and its step response,
+/// +3e-7..4e-7 over the first third of the record, diverged to -1e-4 at its end: the slowest
+/// modes are the ones the record determines least, so the horizon is a quarter of it (two to
+/// ten periods of the battery's oscillators), and the median ignores the first samples'
+/// transient. The covariance of input and output is no substitute either: on a two-mass record
+/// driven near its resonance it pointed the wrong way. `None` when the gain is zero or not
+/// finite (the weight stays free).
+pub(super) fn restoring_sign(
+    ss: &StateSpace,
+    c_row: &[f64],
+    d_k: f64,
+    k: usize,
+    horizon: usize,
+) -> Option<f64> {
     let n = ss.order();
-    let bk = ss.b.columns(k, 1).into_owned();
-    let x = (nalgebra::DMatrix::<f64>::identity(n, n) - &ss.a)
-        .lu()
-        .solve(&bk)?;
-    let g: f64 = d_k + (0..n).map(|j| c_row[j] * x[j]).sum::<f64>();
-    (g.is_finite() && g != 0.0).then(|| -g.signum())
+    let mut x = ss.b.columns(k, 1).into_owned();
+    let mut step = d_k;
+    let mut steps = Vec::with_capacity(horizon.max(1));
+    for _ in 0..horizon.max(1) {
+        steps.push(step);
+        step += (0..n).map(|j| c_row[j] * x[j]).sum::<f64>();
+        x = &ss.a * x;
+    }
+    let mid = steps.len() / 2;
+    let (_, g, _) = steps.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+    (g.is_finite() && *g != 0.0).then(|| -g.signum())
 }
 
 impl Prepared<'_> {
@@ -94,11 +124,15 @@ impl Prepared<'_> {
             Cause::Hysteresis => {
                 // elastic-perfectly-plastic elements (stop operators) on the displacement:
                 // a Prandtl-Ishlinskii restoring force
-                // Loops wider than friction's pre-sliding: the narrowest play width (0.5 % of
-                // the range) is left to friction, whose force saturates within it; without this
-                // cut Bouc-Wen and LuGre records were confused both ways (about 1 in 5).
+                // The narrowest element is friction's pre-sliding stop, shared by both causes
+                // (a refinement of one then starts from the other's optimum); the wider ones are
+                // what a loop that grows with the excursion needs.
                 let range = span(x);
-                let narrow: &[f64] = if rich { &[0.0005, 0.002, 0.005] } else { &[] };
+                let narrow: &[f64] = if rich {
+                    &[0.0005, PRESLIDING, 0.005]
+                } else {
+                    &[PRESLIDING]
+                };
                 for &w in narrow.iter().chain(&PLAY_WIDTHS[1..]) {
                     let r = w * range;
                     signals.push((
@@ -123,9 +157,9 @@ impl Prepared<'_> {
                     format!("Stribeck peak of d{name}/dt"),
                 ));
                 // the direction of motion held while the mass sticks: an elastic-plastic
-                // element with 0.5 % of the stroke as pre-sliding (as for a simulator's state)
+                // element with `PRESLIDING` of the stroke as pre-sliding
                 let range = span(x);
-                let r = 0.005 * range;
+                let r = PRESLIDING * range;
                 signals.push((
                     LoopSignal::Stop(r),
                     format!("Coulomb friction with pre-sliding r={r:.4} on {name}"),
@@ -203,7 +237,7 @@ impl Prepared<'_> {
         let mut nonneg = Vec::new();
         for &k in &rec.drives {
             let d_k = ch.theta[order + k];
-            let sign = restoring_sign(ss, &ch.theta[..order], d_k, k);
+            let sign = restoring_sign(ss, &ch.theta[..order], d_k, k, self.sign_horizon());
             for ((sig, label), (spec, _)) in signals.iter().zip(&specs) {
                 let mut col = ss.filter(sig, k, &ch.theta[..order], d_k, starts);
                 let constrained = spec.dissipative() && sign.is_some();
@@ -216,6 +250,17 @@ impl Prepared<'_> {
             }
         }
         Some((cols, names, nonneg))
+    }
+
+    /// A quarter of the rows of the record's longest trial (segment), the horizon of
+    /// [`restoring_sign`].
+    pub(super) fn sign_horizon(&self) -> usize {
+        signal::segments(&self.rec.segment_starts, self.rec.len())
+            .iter()
+            .map(|(s, e)| (e - s) / 4)
+            .max()
+            .unwrap_or(1)
+            .max(1)
     }
 
     /// Velocity of the baseline's free-run output of channel `c` and its sign-smoothing scale

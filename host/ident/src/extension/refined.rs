@@ -1,6 +1,7 @@
 //! What an in-loop refinement produces, and the record of finished ones that the selection
 //! reuses: the data both the refinement and the prepared record hold, apart from the code.
 
+use super::dynamic_features::LoopSignal;
 use crate::cause::Cause;
 
 /// The result of an in-loop refinement of one output channel.
@@ -28,5 +29,7 @@ pub(super) struct Cached {
     pub(super) x0: Vec<f64>,
     /// Weights per cause (per drive, per signal).
     pub(super) weights: Vec<Vec<f64>>,
+    /// Signals per cause, in the order of `weights`.
+    pub(super) signals: Vec<Vec<LoopSignal>>,
     pub(super) fit: InLoopFit,
 }

@@ -3,7 +3,9 @@
 //! `ocm-learn`, trained on pairs from the tactile FEM and the physically based renderer
 //! ([`pairs`]).
 
+pub mod bench;
 pub mod force;
+pub mod infer;
 pub mod pairs;
 pub mod real_frames;
 
@@ -305,18 +307,29 @@ impl NetData {
         self.len() == 0
     }
 
-    /// The network input of samples `idx`, `[b, C, rows, cols]`.
-    pub fn inputs(&self, idx: &[usize], device: &Device) -> Tensor<4> {
-        let n = self.rows * self.cols;
-        let per = self.input_channels * n;
-        let c_all = per + self.coords.len();
-        let mut v = Vec::with_capacity(idx.len() * c_all);
+    /// Channels of the network input (coordinates included).
+    pub fn network_channels(&self) -> usize {
+        self.input_channels + self.coords.len() / (self.rows * self.cols).max(1)
+    }
+
+    /// The network input of samples `idx`, `[b, C, rows, cols]` row-major.
+    pub fn input_values(&self, idx: &[usize]) -> Vec<f32> {
+        let per = self.input_channels * self.rows * self.cols;
+        let mut v = Vec::with_capacity(idx.len() * (per + self.coords.len()));
         for &i in idx {
             v.extend_from_slice(&self.input[i * per..(i + 1) * per]);
             v.extend_from_slice(&self.coords);
         }
+        v
+    }
+
+    /// The network input of samples `idx`, `[b, C, rows, cols]`.
+    pub fn inputs(&self, idx: &[usize], device: &Device) -> Tensor<4> {
         Tensor::from_data(
-            TensorData::new(v, [idx.len(), c_all / n, self.rows, self.cols]),
+            TensorData::new(
+                self.input_values(idx),
+                [idx.len(), self.network_channels(), self.rows, self.cols],
+            ),
             device,
         )
     }
@@ -406,9 +419,42 @@ impl NetData {
         }
     }
 
+    /// [`NetData::predict`] on the plain engine; `None` when it does not take this network
+    /// or input (then burn's graph decides).
+    fn predict_plain(&self, net: &UNet, idx: &[usize], chunk: usize) -> Option<Vec<f32>> {
+        let plain = infer::PlainUNet::new(net).ok()?;
+        let n = self.rows * self.cols;
+        let c = plain.output_channels();
+        let mut out = Vec::with_capacity(idx.len() * n * self.target_channels);
+        for b in idx.chunks(chunk.max(1)) {
+            let y = plain
+                .forward(&self.input_values(b), b.len(), self.rows, self.cols)
+                .ok()?;
+            for img in y.chunks_exact(c * n) {
+                match self.kind {
+                    NetKind::Perception => out.extend(
+                        img.get(2 * n..3 * n)?
+                            .iter()
+                            .map(|&t| target_to_dz(f64::from(t)) as f32),
+                    ),
+                    NetKind::Rendering => out.extend(img.iter().map(|v| v.tanh() * 255.0)),
+                }
+            }
+        }
+        Some(out)
+    }
+
     /// Network output for samples `idx` in chunks of `chunk`: the predicted dz (m, `[rows,
-    /// cols]` per sample) or delta image (grey levels, `[3, rows, cols]`).
+    /// cols]` per sample) or delta image (grey levels, `[3, rows, cols]`). Off an autodiff
+    /// device it runs on the plain engine ([`infer::PlainUNet`], the same values several times
+    /// faster), on one through burn's graph.
     pub fn predict(&self, net: &UNet, idx: &[usize], chunk: usize, device: &Device) -> Vec<f32> {
+        if let Some(out) = (!device.is_autodiff())
+            .then(|| self.predict_plain(net, idx, chunk))
+            .flatten()
+        {
+            return out;
+        }
         let mut out = Vec::new();
         for b in idx.chunks(chunk.max(1)) {
             let y = net.forward(self.inputs(b, device));

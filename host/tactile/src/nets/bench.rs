@@ -1,0 +1,114 @@
+//! Inference throughput of the perception and rendering networks at a given image size.
+
+use super::infer::PlainUNet;
+use super::{NetConfig, NetKind};
+use crate::{Result, TactileError};
+use ocm_learn::burn::tensor::{Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+
+/// Images per second of one network on the current thread pool.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct NetBench {
+    /// Which network.
+    pub kind: NetKind,
+    /// Which implementation: "burn" (the training graph on burn's CPU backend) or "plain"
+    /// ([`super::infer::PlainUNet`], what scoring and `ocm tactile perceive` use).
+    pub engine: String,
+    /// Image size (rows, cols).
+    pub size: [usize; 2],
+    /// Images per forward call.
+    pub batch: usize,
+    /// Worker threads of the pool it ran on.
+    pub threads: usize,
+    /// Images per second of each repeat.
+    pub images_per_s: Vec<f64>,
+    /// Median of `images_per_s`.
+    pub median_images_per_s: f64,
+}
+
+/// Deterministic input values in [-1, 1] of `n` elements.
+fn input_values(n: usize) -> Vec<f32> {
+    (0..n).map(|i| ((i as f32) * 0.618_034).sin()).collect()
+}
+
+/// Times `repeats` forward calls of a batch of `batch` images of `rows` x `cols` through a
+/// freshly initialised `kind` network (after one warm-up call), on the current rayon pool,
+/// with the plain engine and, when `with_burn`, burn's graph; when `with_train`, also up to 2
+/// forward and backward passes on burn's autodiff device (engine "burn-train-step", images per
+/// second of training without the optimiser step).
+pub fn bench_inference(
+    kind: NetKind,
+    rows: usize,
+    cols: usize,
+    batch: usize,
+    repeats: usize,
+    with_burn: bool,
+    with_train: bool,
+) -> Result<Vec<NetBench>> {
+    if batch == 0 || repeats == 0 {
+        return Err(TactileError::Input(
+            "a network benchmark needs a batch and repeats".into(),
+        ));
+    }
+    let cfg = match kind {
+        NetKind::Perception => NetConfig::perception(rows, cols),
+        NetKind::Rendering => NetConfig::rendering(rows, cols),
+    };
+    let dev = ocm_learn::cpu();
+    let net = cfg.init(&dev, 0)?;
+    let c = cfg.unet.input;
+    let x = input_values(batch * c * rows * cols);
+    let threads = rayon::current_num_threads();
+    let record = |engine: &str, ips: Vec<f64>| NetBench {
+        kind,
+        engine: engine.into(),
+        size: [rows, cols],
+        batch,
+        threads,
+        median_images_per_s: ocm_mor::run::median(&ips),
+        images_per_s: ips,
+    };
+    let mut out = Vec::new();
+    let plain = PlainUNet::new(&net)?;
+    let mut ips = Vec::new();
+    for k in 0..=repeats {
+        let t0 = std::time::Instant::now();
+        std::hint::black_box(plain.forward(&x, batch, rows, cols)?);
+        if k > 0 {
+            ips.push(batch as f64 / t0.elapsed().as_secs_f64());
+        }
+    }
+    out.push(record("plain", ips));
+    if with_burn {
+        let mut ips = Vec::new();
+        for k in 0..=repeats {
+            let t =
+                Tensor::<4>::from_data(TensorData::new(x.clone(), [batch, c, rows, cols]), &dev);
+            let t0 = std::time::Instant::now();
+            std::hint::black_box(ocm_learn::values(net.forward(t)));
+            if k > 0 {
+                ips.push(batch as f64 / t0.elapsed().as_secs_f64());
+            }
+        }
+        out.push(record("burn", ips));
+    }
+    if with_train {
+        // A training step's dominant cost: forward and backward through burn's autodiff
+        // graph (batch statistics), the optimiser's update excluded.
+        let dev = ocm_learn::cpu_autodiff();
+        let net = cfg.init(&dev, 0)?;
+        let mut ips = Vec::new();
+        for k in 0..=repeats.min(2) {
+            let t =
+                Tensor::<4>::from_data(TensorData::new(x.clone(), [batch, c, rows, cols]), &dev);
+            let t0 = std::time::Instant::now();
+            let loss = net.forward(t).powi_scalar(2).mean();
+            std::hint::black_box(loss.backward());
+            if k > 0 {
+                ips.push(batch as f64 / t0.elapsed().as_secs_f64());
+            }
+        }
+        out.push(record("burn-train-step", ips));
+    }
+    Ok(out)
+}

@@ -1,0 +1,752 @@
+//! Plain `f32` inference of a trained [`UNet`] for full-size images: the weights are copied out
+//! of the burn modules once (batch normalisation folded into the convolutions), each image runs
+//! channel-last with a one-pixel zero border, and every 3 x 3 convolution is three matrix
+//! products on overlapping views of that buffer (no im2col copy) through faer's kernels. Images
+//! of a batch run in parallel on the current rayon pool. It mirrors [`UNet::forward`] with
+//! running statistics (evaluation) and is tested against it.
+
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatMut, MatRef, Par};
+use ocm_learn::burn::nn::PaddingConfig2d;
+use ocm_learn::burn::nn::conv::{Conv2d, ConvTranspose2d};
+use ocm_learn::mlp::Activation;
+use ocm_learn::unet::ConvBlock;
+use ocm_learn::{UNet, values};
+use rayon::prelude::*;
+
+use crate::{Result, TactileError};
+
+/// A feature map of one image, channel-last, with a one-pixel zero border and two spare pixels
+/// at the end (the last row of the shifted views reads two pixels past the border).
+#[derive(Debug, Clone)]
+struct Map {
+    h: usize,
+    w: usize,
+    c: usize,
+    data: Vec<f32>,
+}
+
+thread_local! {
+    /// Buffers of dropped maps and products on this thread, reused: a full-size image
+    /// allocates tens of MB per layer, and fresh pages from the system (page faults, zeroing)
+    /// cost about as much as the arithmetic.
+    static POOL: std::cell::RefCell<Vec<Vec<f32>>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// A buffer of `n` values from the pool, contents unspecified (every user overwrites it).
+fn take(n: usize) -> Vec<f32> {
+    let mut v = POOL
+        .with(|p| {
+            let mut p = p.borrow_mut();
+            let best = (0..p.len())
+                .filter(|&i| p[i].capacity() >= n)
+                .min_by_key(|&i| p[i].capacity())
+                .or_else(|| (0..p.len()).max_by_key(|&i| p[i].capacity()));
+            best.map(|i| p.swap_remove(i))
+        })
+        .unwrap_or_default();
+    v.resize(n, 0.0);
+    v
+}
+
+/// Returns a buffer to the pool (at most 16 are kept).
+fn give(v: Vec<f32>) {
+    POOL.with(|p| {
+        let mut p = p.borrow_mut();
+        if p.len() < 16 {
+            p.push(v);
+        }
+    });
+}
+
+impl Drop for Map {
+    fn drop(&mut self) {
+        give(std::mem::take(&mut self.data));
+    }
+}
+
+impl Map {
+    /// A map whose interior is to be written by the caller, who then zeroes the border
+    /// ([`Map::zero_border`]).
+    fn uninit(h: usize, w: usize, c: usize) -> Self {
+        Map {
+            h,
+            w,
+            c,
+            data: take(((h + 2) * (w + 2) + 2) * c),
+        }
+    }
+
+    /// Zeroes the border pixels and the two spare ones.
+    fn zero_border(&mut self) {
+        let (pw, c) = (self.w + 2, self.c);
+        self.data[..pw * c].fill(0.0);
+        for r in 1..=self.h {
+            self.data[(r * pw - 1) * c..(r * pw + 1) * c].fill(0.0);
+        }
+        let n = self.data.len();
+        self.data[((self.h + 1) * pw - 1) * c..n].fill(0.0);
+    }
+
+    /// Offset of interior pixel (r, col).
+    fn at(&self, r: usize, col: usize) -> usize {
+        ((r + 1) * (self.w + 2) + col + 1) * self.c
+    }
+
+    /// From one `[c, h, w]` image.
+    fn from_chw(x: &[f32], c: usize, h: usize, w: usize) -> Self {
+        let mut m = Map::uninit(h, w, c);
+        for r in 0..h {
+            for col in 0..w {
+                let o = m.at(r, col);
+                for ch in 0..c {
+                    m.data[o + ch] = x[(ch * h + r) * w + col];
+                }
+            }
+        }
+        m.zero_border();
+        m
+    }
+}
+
+/// One input's share of a 3 x 3 convolution: for each kernel row dy a `[3 c_in, c_out]`
+/// row-major matrix whose rows run over (dx, input channel).
+#[derive(Debug, Clone)]
+struct Conv3Part {
+    c_in: usize,
+    taps: [Vec<f32>; 3],
+}
+
+/// Convolution, normalisation and nonlinearity of one level.
+#[derive(Debug, Clone)]
+struct Block {
+    /// One part per input map (the encoder has one; a decoder level has the upsampled map and
+    /// the skip, whose concatenation is the sum of two convolutions).
+    parts: Vec<Conv3Part>,
+    c_out: usize,
+    /// Bias after the convolution (with batch normalisation folded in).
+    bias: Vec<f32>,
+    /// Group normalisation: groups, gamma, beta, epsilon.
+    group: Option<(usize, Vec<f32>, Vec<f32>, f32)>,
+    activation: Activation,
+}
+
+/// A 2 x 2 stride-2 transposed convolution: `[c_in, 4 c_out]` row-major, columns over
+/// (ky, kx, output channel).
+#[derive(Debug, Clone)]
+struct Up {
+    c_in: usize,
+    c_out: usize,
+    weight: Vec<f32>,
+    bias: Vec<f32>,
+}
+
+/// The U-Net's weights as plain values (see the module documentation).
+#[derive(Debug, Clone)]
+pub struct PlainUNet {
+    input: usize,
+    output: usize,
+    down: Vec<Block>,
+    up: Vec<Up>,
+    merge: Vec<Block>,
+    /// 1 x 1 head, `[c, output]` row-major.
+    head: Vec<f32>,
+    head_bias: Vec<f32>,
+}
+
+fn bias_of(conv: &Conv2d, c_out: usize) -> Vec<f32> {
+    conv.bias
+        .as_ref()
+        .map_or_else(|| vec![0.0; c_out], |b| values(b.val()))
+}
+
+fn check_conv(conv: &Conv2d, what: &str, kernel: usize) -> Result<[usize; 4]> {
+    let d = conv.weight.dims();
+    let pad = if kernel == 3 {
+        PaddingConfig2d::Explicit(1, 1, 1, 1)
+    } else {
+        PaddingConfig2d::Valid
+    };
+    let same_size = conv.padding == pad
+        || (conv.padding == PaddingConfig2d::Same)
+        || (kernel == 1 && conv.padding == PaddingConfig2d::Explicit(0, 0, 0, 0));
+    if !same_size
+        || d[2] != kernel
+        || d[3] != kernel
+        || conv.stride != [1, 1]
+        || conv.dilation != [1, 1]
+        || conv.groups != 1
+    {
+        return Err(TactileError::Input(format!(
+            "{what}: plain inference takes {kernel} x {kernel} convolutions of stride 1 that \
+             keep the size, got weights {d:?}, stride {:?}, padding {:?}",
+            conv.stride, conv.padding
+        )));
+    }
+    Ok(d)
+}
+
+impl Block {
+    /// From a block whose inputs have `splits` channels (concatenated in that order).
+    fn new(b: &ConvBlock, splits: &[usize]) -> Result<Self> {
+        let [c_out, c_in, _, _] = check_conv(&b.conv, "U-Net block", 3)?;
+        if splits.iter().sum::<usize>() != c_in {
+            return Err(TactileError::Input(format!(
+                "U-Net block takes {c_in} channels, its inputs have {splits:?}"
+            )));
+        }
+        let w = values(b.conv.weight.val());
+        let mut bias = bias_of(&b.conv, c_out);
+        // Batch normalisation with running statistics is an affine map per output channel.
+        let mut scale = vec![1.0f32; c_out];
+        if let Some(bn) = &b.batch {
+            let (g, be) = (values(bn.gamma.val()), values(bn.beta.val()));
+            let (mean, var) = (
+                values(bn.running_mean.value()),
+                values(bn.running_var.value()),
+            );
+            for co in 0..c_out {
+                let s = g[co] / (var[co] + bn.epsilon as f32).sqrt();
+                scale[co] = s;
+                bias[co] = (bias[co] - mean[co]) * s + be[co];
+            }
+        }
+        let mut parts = Vec::new();
+        let mut offset = 0;
+        for &ci_n in splits {
+            let taps = std::array::from_fn(|dy| {
+                let mut t = vec![0.0f32; 3 * ci_n * c_out];
+                for dx in 0..3 {
+                    for ci in 0..ci_n {
+                        for co in 0..c_out {
+                            t[(dx * ci_n + ci) * c_out + co] =
+                                w[((co * c_in + offset + ci) * 3 + dy) * 3 + dx] * scale[co];
+                        }
+                    }
+                }
+                t
+            });
+            parts.push(Conv3Part { c_in: ci_n, taps });
+            offset += ci_n;
+        }
+        let group = match &b.group {
+            Some(gn) => {
+                let ones = vec![1.0; c_out];
+                let zeros = vec![0.0; c_out];
+                let gamma = gn.gamma.as_ref().map_or(ones, |g| values(g.val()));
+                let beta = gn.beta.as_ref().map_or(zeros, |g| values(g.val()));
+                Some((gn.num_groups, gamma, beta, gn.epsilon as f32))
+            }
+            None => None,
+        };
+        Ok(Block {
+            parts,
+            c_out,
+            bias,
+            group,
+            activation: b.activation(),
+        })
+    }
+
+    /// Convolution of the inputs (same size, channels as the parts), normalisation, activation.
+    fn forward(&self, inputs: &[&Map], par: Par) -> Map {
+        let (h, w) = (inputs[0].h, inputs[0].w);
+        let pw = w + 2;
+        // Output rows over (r, padded column): the last two columns of each row are unused.
+        let m = h * pw;
+        let c_out = self.c_out;
+        // Product row q = r (w + 2) + col is interior pixel (r, col) of the output map, at
+        // padded index q + w + 3: the product is written straight into the map, its two unused
+        // columns per row landing on the border, which is zeroed afterwards.
+        let mut out = Map::uninit(h, w, c_out);
+        let start = (pw + 1) * c_out;
+        let mut accum = Accum::Replace;
+        for (part, x) in self.parts.iter().zip(inputs) {
+            let c = part.c_in;
+            debug_assert_eq!(x.c, c);
+            for (dy, tap) in part.taps.iter().enumerate() {
+                // Row q of this view is the 3 x c values of the pixels (r + dy, col .. col + 3)
+                // of the padded input, consecutive rows overlapping by 2 c. faer checks that
+                // the last element, (m - 1) c + 3 c - 1 past the start, lies in the slice (the
+                // map keeps 2 spare pixels for dy = 2).
+                let a =
+                    MatRef::from_row_major_slice_with_stride(&x.data[dy * pw * c..], m, 3 * c, c);
+                let b = MatRef::from_row_major_slice(tap, 3 * c, c_out);
+                let dst = MatMut::from_row_major_slice_mut(
+                    &mut out.data[start..start + m * c_out],
+                    m,
+                    c_out,
+                );
+                matmul(dst, accum, a, b, 1.0f32, par);
+                accum = Accum::Add;
+            }
+        }
+        out.zero_border();
+        let bias = &self.bias;
+        match (&self.group, self.activation) {
+            (None, Activation::Relu) => out.each_pixel(|px| {
+                for (v, b) in px.iter_mut().zip(bias) {
+                    *v = (*v + b).max(0.0);
+                }
+            }),
+            (None, act) => {
+                out.each_pixel(|px| px.iter_mut().zip(bias).for_each(|(v, b)| *v += b));
+                activate(&mut out.data, act);
+            }
+            (Some((groups, gamma, beta, eps)), act) => {
+                group_norm(&mut out, bias, *groups, gamma, beta, *eps);
+                activate(&mut out.data, act);
+            }
+        }
+        out
+    }
+}
+
+/// Applies `act` to every value (each maps 0 to 0, so the zero border stays zero).
+fn activate(v: &mut [f32], act: Activation) {
+    match act {
+        Activation::Relu => v.iter_mut().for_each(|x| *x = x.max(0.0)),
+        Activation::Gelu => gelu(v),
+        Activation::Tanh => v.iter_mut().for_each(|x| *x = x.tanh()),
+    }
+}
+
+impl Map {
+    /// Calls `f` on the channels of every interior pixel.
+    fn each_pixel(&mut self, mut f: impl FnMut(&mut [f32])) {
+        let (w, c) = (self.w, self.c);
+        for r in 0..self.h {
+            let o = self.at(r, 0);
+            self.data[o..o + w * c].chunks_exact_mut(c).for_each(&mut f);
+        }
+    }
+}
+
+/// Adds `bias` and applies group normalisation over the interior pixels, in place: per group
+/// of channels, mean and variance over all its values (as burn's `GroupNorm`, the sums in
+/// f64), then the per-channel affine map.
+fn group_norm(x: &mut Map, bias: &[f32], groups: usize, gamma: &[f32], beta: &[f32], eps: f32) {
+    let (c, cg) = (x.c, x.c / groups);
+    let n = (x.h * x.w * cg) as f64;
+    let mut sum = vec![0.0f64; c];
+    let mut sq = vec![0.0f64; c];
+    x.each_pixel(|px| {
+        for (((v, b), s), q) in px.iter_mut().zip(bias).zip(&mut sum).zip(&mut sq) {
+            *v += b;
+            let v = f64::from(*v);
+            *s += v;
+            *q += v * v;
+        }
+    });
+    let mut scale = vec![0.0f32; c];
+    let mut shift = vec![0.0f32; c];
+    for g in 0..groups {
+        let mean = sum[g * cg..(g + 1) * cg].iter().sum::<f64>() / n;
+        let var = (sq[g * cg..(g + 1) * cg].iter().sum::<f64>() / n - mean * mean).max(0.0);
+        let inv = 1.0 / (var + f64::from(eps)).sqrt();
+        for ch in g * cg..(g + 1) * cg {
+            scale[ch] = (inv * f64::from(gamma[ch])) as f32;
+            shift[ch] = (f64::from(beta[ch]) - mean * inv * f64::from(gamma[ch])) as f32;
+        }
+    }
+    x.each_pixel(|px| {
+        for ((v, s), t) in px.iter_mut().zip(&scale).zip(&shift) {
+            *v = *v * s + t;
+        }
+    });
+}
+
+/// e^y for y <= 0 without a library call, so the loops around it vectorise: y = k ln 2 + f with
+/// |f| <= ln 2 / 2, e^f by its Taylor polynomial to degree 7 (relative error below 2e-8), and
+/// 2^k through the exponent bits; below -87 it is 0.
+#[inline(always)]
+fn exp_neg(y_in: f32) -> f32 {
+    const ROUND: f32 = 12_582_912.0; // 1.5 * 2^23: adding and subtracting it rounds to integer
+    let y = y_in.max(-87.0);
+    let k = (y * std::f32::consts::LOG2_E + ROUND) - ROUND;
+    // ln 2 split in two so k ln 2 is exact to f32 precision.
+    let f = (y - k * 0.693_145_75) - k * 1.428_606_8e-6;
+    let p = 1.0
+        + f * (1.0
+            + f * (0.5
+                + f * (1.0 / 6.0
+                    + f * (1.0 / 24.0
+                        + f * (1.0 / 120.0 + f * (1.0 / 720.0 + f * (1.0 / 5040.0)))))));
+    // Wrapping arithmetic: k + 127 lies in 1..=127 here, and an overflow check would keep the
+    // loop from vectorising (the dev profile checks overflow).
+    let v = p * f32::from_bits(((k as i32).wrapping_add(127) as u32).wrapping_shl(23));
+    if y_in < -87.0 { 0.0 } else { v }
+}
+
+/// GELU with the exact (erf) form, in place: erf through the rational approximation 7.1.26 of
+/// Abramowitz and Stegun (absolute error below 1.5e-7), written so the loop vectorises (the
+/// burn backend calls libm's erf per value, which dominated the rendering network's time).
+fn gelu(v: &mut [f32]) {
+    const P: f32 = 0.327_591_1;
+    const A: [f32; 5] = [
+        0.254_829_6,
+        -0.284_496_74,
+        1.421_413_7,
+        -1.453_152_1,
+        1.061_405_4,
+    ];
+    for x in v.iter_mut() {
+        let z = x.abs() * std::f32::consts::FRAC_1_SQRT_2;
+        let t = 1.0 / (1.0 + P * z);
+        let poly = t * (A[0] + t * (A[1] + t * (A[2] + t * (A[3] + t * A[4]))));
+        // 1 - erf(|x| / sqrt 2): taken directly for negative x, where 1 + erf cancels.
+        let tail = poly * exp_neg(-z * z);
+        let one_plus_erf = if *x < 0.0 { tail } else { 2.0 - tail };
+        *x *= 0.5 * one_plus_erf;
+    }
+}
+
+fn max_pool(x: &Map) -> Map {
+    let (h, w, c) = (x.h / 2, x.w / 2, x.c);
+    let mut out = Map::uninit(h, w, c);
+    for r in 0..h {
+        for col in 0..w {
+            let o = out.at(r, col);
+            let (a, b) = (x.at(2 * r, 2 * col), x.at(2 * r + 1, 2 * col));
+            for ch in 0..c {
+                out.data[o + ch] = x.data[a + ch]
+                    .max(x.data[a + c + ch])
+                    .max(x.data[b + ch])
+                    .max(x.data[b + c + ch]);
+            }
+        }
+    }
+    out.zero_border();
+    out
+}
+
+impl Up {
+    fn new(u: &ConvTranspose2d) -> Result<Self> {
+        let d = u.weight.dims();
+        if d[2] != 2
+            || d[3] != 2
+            || u.stride != [2, 2]
+            || u.groups != 1
+            || u.padding != [0, 0]
+            || u.padding_out != [0, 0]
+            || u.dilation != [1, 1]
+        {
+            return Err(TactileError::Input(format!(
+                "U-Net upsampling: plain inference takes 2 x 2 stride-2 transposed convolutions, \
+                 got weights {d:?}, stride {:?}",
+                u.stride
+            )));
+        }
+        let (c_in, c_out) = (d[0], d[1]);
+        let w = values(u.weight.val());
+        let mut weight = vec![0.0f32; c_in * 4 * c_out];
+        for ci in 0..c_in {
+            for co in 0..c_out {
+                for k in 0..4 {
+                    weight[ci * 4 * c_out + k * c_out + co] = w[(ci * c_out + co) * 4 + k];
+                }
+            }
+        }
+        let bias = u
+            .bias
+            .as_ref()
+            .map_or_else(|| vec![0.0; c_out], |b| values(b.val()));
+        Ok(Up {
+            c_in,
+            c_out,
+            weight,
+            bias,
+        })
+    }
+
+    fn forward(&self, x: &Map, par: Par) -> Map {
+        let (h, w, pw) = (x.h, x.w, x.w + 2);
+        let (ci, co) = (self.c_in, self.c_out);
+        // Every pixel of the interior rows (borders included, they are zero) times the weights.
+        let m = h * pw;
+        let a = MatRef::from_row_major_slice(&x.data[pw * ci..(pw + m) * ci], m, ci);
+        let b = MatRef::from_row_major_slice(&self.weight, ci, 4 * co);
+        let mut acc = take(m * 4 * co);
+        matmul(
+            MatMut::from_row_major_slice_mut(&mut acc, m, 4 * co),
+            Accum::Replace,
+            a,
+            b,
+            1.0f32,
+            par,
+        );
+        let mut out = Map::uninit(2 * h, 2 * w, co);
+        for r in 0..h {
+            for col in 0..w {
+                let src = &acc[(r * pw + col + 1) * 4 * co..][..4 * co];
+                for k in 0..4 {
+                    let o = out.at(2 * r + k / 2, 2 * col + k % 2);
+                    for ((d, s), b) in out.data[o..o + co]
+                        .iter_mut()
+                        .zip(&src[k * co..(k + 1) * co])
+                        .zip(&self.bias)
+                    {
+                        *d = s + b;
+                    }
+                }
+            }
+        }
+        give(acc);
+        out.zero_border();
+        out
+    }
+}
+
+impl PlainUNet {
+    /// Copies the weights of `net` (evaluation: batch normalisation with running statistics).
+    pub fn new(net: &UNet) -> Result<Self> {
+        let input = net.down[0].conv.weight.dims()[1];
+        let mut down = Vec::new();
+        let mut c = input;
+        for b in &net.down {
+            let blk = Block::new(b, &[c])?;
+            c = blk.c_out;
+            down.push(blk);
+        }
+        let mut up = Vec::new();
+        let mut merge = Vec::new();
+        // Decoder level k joins the upsampled map with the skip of encoder level L - 2 - k.
+        for (k, (u, m)) in net.up.iter().zip(&net.merge).enumerate() {
+            let u = Up::new(u)?;
+            let skip = net.down.len().checked_sub(2 + k).map(|l| down[l].c_out);
+            let Some(skip) = skip else {
+                return Err(TactileError::Input(
+                    "U-Net with more decoder than encoder levels".into(),
+                ));
+            };
+            merge.push(Block::new(m, &[u.c_out, skip])?);
+            up.push(u);
+        }
+        let [output, c_head, _, _] = check_conv(&net.head, "U-Net head", 1)?;
+        let hw = values(net.head.weight.val());
+        let mut head = vec![0.0f32; c_head * output];
+        for o in 0..output {
+            for ch in 0..c_head {
+                head[ch * output + o] = hw[o * c_head + ch];
+            }
+        }
+        Ok(PlainUNet {
+            input,
+            output,
+            down,
+            up,
+            merge,
+            head,
+            head_bias: bias_of(&net.head, output),
+        })
+    }
+
+    /// Output channels.
+    pub fn output_channels(&self) -> usize {
+        self.output
+    }
+
+    /// One `[input, h, w]` image to `[output, h, w]`, matrix products on `par` threads.
+    fn forward_one(&self, x: &[f32], h: usize, w: usize, par: Par) -> Vec<f32> {
+        let mut levels: Vec<Map> = Vec::with_capacity(self.down.len());
+        let first = Map::from_chw(x, self.input, h, w);
+        for (l, b) in self.down.iter().enumerate() {
+            let y = if l == 0 {
+                b.forward(&[&first], par)
+            } else {
+                b.forward(&[&max_pool(&levels[l - 1])], par)
+            };
+            levels.push(y);
+        }
+        let mut x = levels.pop().expect("at least two levels");
+        for (u, m) in self.up.iter().zip(&self.merge) {
+            let skip = levels.pop().expect("one skip per decoder level");
+            let up = u.forward(&x, par);
+            x = m.forward(&[&up, &skip], par);
+        }
+        // 1 x 1 head over the interior rows (border pixels included, then dropped).
+        let (pw, c) = (w + 2, x.c);
+        let m = h * pw;
+        let mut acc = take(m * self.output);
+        matmul(
+            MatMut::from_row_major_slice_mut(&mut acc, m, self.output),
+            Accum::Replace,
+            MatRef::from_row_major_slice(&x.data[pw * c..(pw + m) * c], m, c),
+            MatRef::from_row_major_slice(&self.head, c, self.output),
+            1.0f32,
+            par,
+        );
+        let mut out = vec![0.0f32; self.output * h * w];
+        for r in 0..h {
+            for col in 0..w {
+                let src = &acc[(r * pw + col + 1) * self.output..][..self.output];
+                for (o, (s, b)) in src.iter().zip(&self.head_bias).enumerate() {
+                    out[(o * h + r) * w + col] = s + b;
+                }
+            }
+        }
+        give(acc);
+        out
+    }
+
+    /// `[batch, input, h, w]` (row-major) to `[batch, output, h, w]`; h and w must divide by
+    /// 2^(levels - 1). Images run in parallel on the current rayon pool; a single image uses
+    /// the pool inside its matrix products instead.
+    pub fn forward(&self, x: &[f32], batch: usize, h: usize, w: usize) -> Result<Vec<f32>> {
+        let div = 1usize << (self.down.len() - 1);
+        let per = self.input * h * w;
+        if batch == 0
+            || h == 0
+            || w == 0
+            || !h.is_multiple_of(div)
+            || !w.is_multiple_of(div)
+            || x.len() != batch * per
+        {
+            return Err(TactileError::Input(format!(
+                "a U-Net input must be {} channels with height and width divisible by {div}; got \
+                 {} values for {batch} x {} x {h} x {w}",
+                self.input,
+                x.len(),
+                self.input
+            )));
+        }
+        if batch == 1 || rayon::current_num_threads() == 1 {
+            let par = if batch == 1 { Par::rayon(0) } else { Par::Seq };
+            return Ok(x
+                .chunks_exact(per)
+                .flat_map(|img| self.forward_one(img, h, w, par))
+                .collect());
+        }
+        let outs: Vec<Vec<f32>> = x
+            .par_chunks_exact(per)
+            .map(|img| self.forward_one(img, h, w, Par::Seq))
+            .collect();
+        Ok(outs.concat())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nets::NetConfig;
+    use ocm_learn::burn::module::{Param, RunningState};
+    use ocm_learn::burn::tensor::{Device, Tensor, TensorData};
+
+    fn wave(n: usize, k: usize, scale: f32, offset: f32) -> Vec<f32> {
+        (0..n)
+            .map(|i| offset + scale * ((i * 7 + k * 3) as f32 * 0.37).sin())
+            .collect()
+    }
+
+    /// Moves every normalisation away from identity (gamma, beta, running statistics), so
+    /// the folding is exercised.
+    fn perturb_norms(net: &mut UNet, dev: &Device) {
+        let t = |v: Vec<f32>| {
+            let n = v.len();
+            Tensor::<1>::from_data(TensorData::new(v, [n]), dev)
+        };
+        for (k, b) in net.down.iter_mut().chain(net.merge.iter_mut()).enumerate() {
+            let c = b.conv.weight.dims()[0];
+            if let Some(bn) = b.batch.as_mut() {
+                bn.gamma = Param::from_tensor(t(wave(c, k, 0.3, 1.0)));
+                bn.beta = Param::from_tensor(t(wave(c, k + 1, 0.2, 0.0)));
+                bn.running_mean = RunningState::new(t(wave(c, k + 2, 0.1, 0.0)));
+                bn.running_var = RunningState::new(t(wave(c, k + 3, 0.4, 1.0)));
+            }
+            if let Some(gn) = b.group.as_mut() {
+                gn.gamma = Some(Param::from_tensor(t(wave(c, k, 0.3, 1.0))));
+                gn.beta = Some(Param::from_tensor(t(wave(c, k + 1, 0.2, 0.0))));
+            }
+        }
+    }
+
+    /// The plain forward pass equals burn's (evaluation mode) for both networks, one image
+    /// and a parallel batch, at two sizes (12 x 20 has an odd-sized bottleneck, 3 x 5); a
+    /// wrong input size is refused.
+    #[test]
+    fn plain_forward_matches_burn() {
+        let dev = ocm_learn::cpu();
+        for (rows, cols, cfg) in [(16, 24), (12, 20)].into_iter().flat_map(|(r, c)| {
+            [NetConfig::perception(r, c), NetConfig::rendering(r, c)].map(|n| (r, c, n))
+        }) {
+            let mut net = cfg.init(&dev, 5).unwrap();
+            perturb_norms(&mut net, &dev);
+            let plain = PlainUNet::new(&net).unwrap();
+            let c = cfg.unet.input;
+            for batch in [1, 3] {
+                let x = wave(batch * c * rows * cols, batch, 1.0, 0.1);
+                let t = Tensor::<4>::from_data(
+                    TensorData::new(x.clone(), [batch, c, rows, cols]),
+                    &dev,
+                );
+                let want = values(net.forward(t));
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(2)
+                    .build()
+                    .unwrap();
+                let got = pool
+                    .install(|| plain.forward(&x, batch, rows, cols))
+                    .unwrap();
+                assert_eq!(got.len(), want.len());
+                let scale = want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+                let err = got
+                    .iter()
+                    .zip(&want)
+                    .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+                assert!(
+                    err < 1e-4 * scale,
+                    "{:?} batch {batch}: {err} of {scale}",
+                    cfg.kind
+                );
+            }
+            assert!(
+                plain
+                    .forward(&vec![0.0; c * 14 * cols], 1, 14, cols)
+                    .is_err()
+            );
+            assert!(
+                plain
+                    .forward(&vec![0.0; c * rows * cols], 2, rows, cols)
+                    .is_err()
+            );
+        }
+    }
+
+    /// erf by its Maclaurin series in f64 (for |z| <= 3.6 the largest term is below 1e6, so the
+    /// sum keeps about 1e-10).
+    fn erf_series(z: f64) -> f64 {
+        let (mut term, mut sum) = (z, 0.0);
+        for n in 0..200 {
+            sum += term / (2 * n + 1) as f64;
+            term *= -z * z / (n + 1) as f64;
+        }
+        sum * 2.0 / std::f64::consts::PI.sqrt()
+    }
+
+    /// The vectorisable exponential against the library's, GELU against erf's series.
+    #[test]
+    fn exp_and_gelu_match_references() {
+        for i in 0..2000 {
+            let y = -(i as f32) * 0.05;
+            let (a, b) = (exp_neg(y), y.exp());
+            if y < -87.0 {
+                assert_eq!(a, 0.0, "{y}");
+            } else {
+                assert!((a - b).abs() <= 3e-7 * b, "{y}: {a} vs {b}");
+            }
+        }
+        let xs: Vec<f32> = (-250..=250).map(|i| i as f32 * 0.02).collect();
+        let mut g = xs.clone();
+        gelu(&mut g);
+        for (x, y) in xs.iter().zip(&g) {
+            let x64 = f64::from(*x);
+            let exact = 0.5 * x64 * (1.0 + erf_series(x64 * std::f64::consts::FRAC_1_SQRT_2));
+            let err = (f64::from(*y) - exact).abs();
+            assert!(err < 3e-7 * (1.0 + x64.abs()), "{x}: {y} vs {exact}");
+        }
+        // Far out GELU is x or 0.
+        let mut far = [-20.0f32, 20.0];
+        gelu(&mut far);
+        assert_eq!(far, [0.0, 20.0]);
+    }
+}
