@@ -3,6 +3,7 @@
 //! column equilibration and a tiny ridge are accurate and cheap.
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 /// A fitted linear model.
 #[derive(Debug, Clone)]
@@ -38,7 +39,7 @@ pub fn fit(columns: &[&[f64]], target: &[f64], mask: &[bool], nonneg: &[bool]) -
     // bit for bit the plain loop's (the selection's refinements end in other local optima with
     // rounding-level changes, see the README).
     let gathered: Vec<Vec<f64>> = columns
-        .iter()
+        .par_iter()
         .map(|col| rows.iter().map(|&i| col[i]).collect())
         .collect();
     let t: Vec<f64> = rows.iter().map(|&i| target[i]).collect();
@@ -50,39 +51,48 @@ pub fn fit(columns: &[&[f64]], target: &[f64], mask: &[bool], nonneg: &[bool]) -
         s
     };
     let yy = dot(&t, &t);
+    // Row a of the Gram matrix's upper triangle and b[a]: independent of the other rows, so
+    // the rows are computed in parallel (large records: a 100k-row fit spends most of its time
+    // here) and land in their places.
+    let upper: Vec<(f64, Vec<f64>)> = (0..p)
+        .into_par_iter()
+        .map(|a| {
+            let xa = &gathered[a];
+            let mut row = Vec::with_capacity(p - a);
+            // Four products at a time: each still sums its rows in order (bit for bit the
+            // plain loop), but four independent sums keep the floating-point adder busy, where
+            // one sum waits on its own last addition.
+            let mut c = a;
+            while c + 4 <= p {
+                let (y0, y1, y2, y3) = (
+                    &gathered[c],
+                    &gathered[c + 1],
+                    &gathered[c + 2],
+                    &gathered[c + 3],
+                );
+                let (mut s0, mut s1, mut s2, mut s3) = (0.0, 0.0, 0.0, 0.0);
+                for ((((x, v0), v1), v2), v3) in xa.iter().zip(y0).zip(y1).zip(y2).zip(y3) {
+                    s0 += x * v0;
+                    s1 += x * v1;
+                    s2 += x * v2;
+                    s3 += x * v3;
+                }
+                row.extend([s0, s1, s2, s3]);
+                c += 4;
+            }
+            for y in &gathered[c..p] {
+                row.push(dot(xa, y));
+            }
+            (dot(xa, &t), row)
+        })
+        .collect();
     let mut g = DMatrix::<f64>::zeros(p, p);
     let mut b = DVector::<f64>::zeros(p);
-    for a in 0..p {
-        let xa = &gathered[a];
-        b[a] = dot(xa, &t);
-        // Four products at a time: each still sums its rows in order (bit for bit the plain
-        // loop), but four independent sums keep the floating-point adder busy, where one sum
-        // waits on its own last addition.
-        let mut c = a;
-        while c + 4 <= p {
-            let (y0, y1, y2, y3) = (
-                &gathered[c],
-                &gathered[c + 1],
-                &gathered[c + 2],
-                &gathered[c + 3],
-            );
-            let (mut s0, mut s1, mut s2, mut s3) = (0.0, 0.0, 0.0, 0.0);
-            for ((((x, v0), v1), v2), v3) in xa.iter().zip(y0).zip(y1).zip(y2).zip(y3) {
-                s0 += x * v0;
-                s1 += x * v1;
-                s2 += x * v2;
-                s3 += x * v3;
-            }
-            for (k, s) in [s0, s1, s2, s3].into_iter().enumerate() {
-                g[(a, c + k)] = s;
-                g[(c + k, a)] = s;
-            }
-            c += 4;
-        }
-        for c in c..p {
-            let s = dot(xa, &gathered[c]);
-            g[(a, c)] = s;
-            g[(c, a)] = s;
+    for (a, (ba, row)) in upper.into_iter().enumerate() {
+        b[a] = ba;
+        for (k, s) in row.into_iter().enumerate() {
+            g[(a, a + k)] = s;
+            g[(a + k, a)] = s;
         }
     }
     let mut active: Vec<bool> = (0..p).map(|j| g[(j, j)] > 0.0).collect();
