@@ -380,8 +380,26 @@ fn exp_neg(y_in: f32) -> f32 {
 
 /// GELU with the exact (erf) form, in place: erf through the rational approximation 7.1.26 of
 /// Abramowitz and Stegun (absolute error below 1.5e-7), written so the loop vectorises (the
-/// burn backend calls libm's erf per value, which dominated the rendering network's time).
+/// burn backend calls libm's erf per value, which dominated the rendering network's time). The
+/// loop is compiled for the widest vector instructions the CPU has, chosen at run time (the
+/// crate itself is built for baseline x86-64, whose SSE2 holds 4 values per instruction).
 fn gelu(v: &mut [f32]) {
+    /// pulp's dispatch inlines `with_simd` into a function compiled with the detected target
+    /// features (a closure's body would not be).
+    struct Gelu<'a>(&'a mut [f32]);
+    impl pulp::WithSimd for Gelu<'_> {
+        type Output = ();
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) {
+            gelu_inline(self.0);
+        }
+    }
+    pulp::Arch::new().dispatch(Gelu(v));
+}
+
+/// [`gelu`]'s loop.
+#[inline(always)]
+fn gelu_inline(v: &mut [f32]) {
     const P: f32 = 0.327_591_1;
     const A: [f32; 5] = [
         0.254_829_6,
