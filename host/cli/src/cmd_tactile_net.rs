@@ -745,6 +745,8 @@ pub fn perceive(a: PerceiveArgs) -> anyhow::Result<()> {
     let top = TopSurface::from_gel(&gel);
     let to_mesh = GridToMesh::new(&top.rest_m, cfg.rows, cfg.cols, &map)?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    // The weights are copied out of burn once, not per image.
+    let plain = nets::infer::PlainUNet::new(&net)?;
     let mut rows = Vec::new();
     for path in &a.images {
         let img = downscale(&RgbImage::read_sized(path, ROWS, COLS)?, scale);
@@ -767,7 +769,9 @@ pub fn perceive(a: PerceiveArgs) -> anyhow::Result<()> {
         };
         let data = NetData::new(NetKind::Perception, &single);
         let t = std::time::Instant::now();
-        let dz = data.predict(&net, &[0], 1, &dev);
+        let dz = data
+            .predict_on(&plain, &[0], 1)
+            .with_context(|| format!("{}: the network does not take this image", path.display()))?;
         let ms = t.elapsed().as_secs_f64() * 1e3;
         let stem = path
             .file_stem()

@@ -422,7 +422,18 @@ impl NetData {
     /// [`NetData::predict`] on the plain engine; `None` when it does not take this network
     /// or input (then burn's graph decides).
     fn predict_plain(&self, net: &UNet, idx: &[usize], chunk: usize) -> Option<Vec<f32>> {
-        let plain = infer::PlainUNet::new(net).ok()?;
+        self.predict_on(&infer::PlainUNet::new(net).ok()?, idx, chunk)
+    }
+
+    /// [`NetData::predict`] on an engine built once by the caller (a loop over single
+    /// images need not copy the weights out of burn for each); `None` when the engine does
+    /// not take this input.
+    pub fn predict_on(
+        &self,
+        plain: &infer::PlainUNet,
+        idx: &[usize],
+        chunk: usize,
+    ) -> Option<Vec<f32>> {
         let n = self.rows * self.cols;
         let c = plain.output_channels();
         let mut out = Vec::with_capacity(idx.len() * n * self.target_channels);
