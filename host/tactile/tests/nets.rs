@@ -97,10 +97,7 @@ fn held_out_ratio_with(kind: NetKind, shuffle: Option<u64>, mask_weight: f32) ->
     let pairs = synthetic(40, 3);
     let mut data = NetData::new(kind, &pairs);
     data.mask_loss_weight = mask_weight;
-    let split = Split {
-        train: (0..32).collect(),
-        val: (32..40).collect(),
-    };
+    let split = split_32_8();
     let cfg = small(kind);
     let net = cfg.init(&cpu_autodiff(), 11).unwrap();
     let tc = smoke_config(40, 8);
@@ -256,10 +253,7 @@ fn perception_with_iou_loss_learns_and_fails_on_shuffled_targets() {
         let mut data = NetData::new(NetKind::Perception, &pairs);
         data.mask_loss_weight = 0.02;
         data.iou_loss_weight = 0.05;
-        let split = Split {
-            train: (0..32).collect(),
-            val: (32..40).collect(),
-        };
+        let split = split_32_8();
         let net = small(NetKind::Perception)
             .init(&cpu_autodiff(), 11)
             .unwrap();
@@ -368,10 +362,7 @@ fn perception_with_force_loss_learns_and_fails_on_shuffled_targets() {
     let (lin, to_mesh) = block_force_map();
     let w = force_weights(&pairs, &lin, &to_mesh);
     let n = ROWS * COLS;
-    let split = Split {
-        train: (0..32).collect(),
-        val: (32..40).collect(),
-    };
+    let split = split_32_8();
     let force = |field: &[f32]| lin.force(&to_mesh.sample(field).unwrap(), nets::CONTACT_DZ_M);
     let truth: Vec<f64> = split
         .val
@@ -503,6 +494,57 @@ fn wrong_images_are_refused() {
     let e = RgbImage::read(&p).unwrap_err().to_string();
     assert!(e.contains("1 channel"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The bfloat16 engine on a trained perception network: its depth maps differ from the f32
+/// engine's by a small fraction of the network's own error, and its contact masks are nearly
+/// the same.
+#[test]
+fn bfloat16_inference_keeps_a_trained_networks_predictions() {
+    use ocm_tactile::nets::infer::Precision;
+    let pairs = synthetic(40, 3);
+    let data = NetData::new(NetKind::Perception, &pairs);
+    let split = split_32_8();
+    let net = small(NetKind::Perception)
+        .init(&cpu_autodiff(), 11)
+        .unwrap();
+    let report = nets::train(&data, net, &split, &smoke_config(30, 8), None).unwrap();
+    let dev = cpu();
+    let full = data.predict_in(&report.model, &split.val, 8, &dev, Precision::F32);
+    let half = data.predict_in(&report.model, &split.val, 8, &dev, Precision::Bf16);
+    let n = ROWS * COLS;
+    let truth = &pairs.dz_m[32 * n..40 * n];
+    let rms = |a: &[f32], b: &[f32]| {
+        (a.iter()
+            .zip(b)
+            .map(|(x, y)| f64::from(x - y).powi(2))
+            .sum::<f64>()
+            / a.len() as f64)
+            .sqrt()
+    };
+    let (own, rounding) = (rms(&full, truth), rms(&half, &full));
+    eprintln!("bf16: u_z RMS difference {rounding:e} m, the network's own error {own:e} m");
+    assert!(
+        rounding > 0.0 && rounding < 0.05 * own,
+        "bf16 moves u_z by {rounding} m RMS against the network's error of {own} m"
+    );
+    let grid = pairs.grid();
+    for k in 0..split.val.len() {
+        let m = |dz: &[f32]| nets::contact_mask(grid, &dz[k * n..(k + 1) * n]);
+        let (a, b) = (m(&full), m(&half));
+        if a.count() + b.count() > 0 {
+            let iou = ocm_tactile::metrics::iou(&a, &b).unwrap();
+            assert!(iou > 0.9, "sample {k}: f32 and bf16 masks IoU {iou}");
+        }
+    }
+}
+
+/// The synthetic set's split: 32 samples to train on, the last 8 held out.
+fn split_32_8() -> Split {
+    Split {
+        train: (0..32).collect(),
+        val: (32..40).collect(),
+    }
 }
 
 /// The smoke runs' training settings: fixed epochs, no validation split or early stop, seed 5.

@@ -1,6 +1,6 @@
 //! Inference throughput of the perception and rendering networks at a given image size.
 
-use super::infer::PlainUNet;
+use super::infer::{PlainUNet, Precision};
 use super::{NetConfig, NetKind};
 use crate::{Result, TactileError};
 use ocm_learn::burn::tensor::{Tensor, TensorData};
@@ -11,8 +11,9 @@ use serde::{Deserialize, Serialize};
 pub struct NetBench {
     /// Which network.
     pub kind: NetKind,
-    /// Which implementation: "burn" (the training graph on burn's CPU backend) or "plain"
-    /// ([`super::infer::PlainUNet`], what scoring and `ocm tactile perceive` use).
+    /// Which implementation: "burn" (the training graph on burn's CPU backend), "plain"
+    /// ([`super::infer::PlainUNet`], what scoring and `ocm tactile perceive` use) or
+    /// "plain-bf16" (the same with [`Precision::Bf16`]).
     pub engine: String,
     /// Image size (rows, cols).
     pub size: [usize; 2],
@@ -24,6 +25,10 @@ pub struct NetBench {
     pub images_per_s: Vec<f64>,
     /// Median of `images_per_s`.
     pub median_images_per_s: f64,
+    /// For "plain-bf16": the RMS of its outputs' difference from the `f32` engine's, relative
+    /// to the RMS of the `f32` outputs' deviation from their mean.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relative_rms_difference: Option<f64>,
 }
 
 /// Deterministic input values in [-1, 1] of `n` elements.
@@ -31,9 +36,25 @@ fn input_values(n: usize) -> Vec<f32> {
     (0..n).map(|i| ((i as f32) * 0.618_034).sin()).collect()
 }
 
+/// RMS of `y - reference` over the RMS of `reference` about its mean.
+pub fn relative_rms_difference(y: &[f32], reference: &[f32]) -> f64 {
+    let n = reference.len().max(1) as f64;
+    let mean = reference.iter().map(|&v| f64::from(v)).sum::<f64>() / n;
+    let spread = reference
+        .iter()
+        .map(|&v| (f64::from(v) - mean).powi(2))
+        .sum::<f64>();
+    let diff = y
+        .iter()
+        .zip(reference)
+        .map(|(&a, &b)| (f64::from(a) - f64::from(b)).powi(2))
+        .sum::<f64>();
+    (diff / spread.max(f64::MIN_POSITIVE)).sqrt()
+}
+
 /// Times `repeats` forward calls of a batch of `batch` images of `rows` x `cols` through a
 /// freshly initialised `kind` network (after one warm-up call), on the current rayon pool,
-/// with the plain engine and, when `with_burn`, burn's graph; when `with_train`, also up to 2
+/// with the plain engine in `f32` and in bfloat16 and, when `with_burn`, burn's graph; when `with_train`, also up to 2
 /// forward and backward passes on burn's autodiff device (engine "burn-train-step", images per
 /// second of training without the optimiser step).
 pub fn bench_inference(
@@ -67,18 +88,34 @@ pub fn bench_inference(
         threads,
         median_images_per_s: ocm_mor::run::median(&ips),
         images_per_s: ips,
+        relative_rms_difference: None,
     };
     let mut out = Vec::new();
     let plain = PlainUNet::new(&net)?;
-    let mut ips = Vec::new();
-    for k in 0..=repeats {
-        let t0 = std::time::Instant::now();
-        std::hint::black_box(plain.forward(&x, batch, rows, cols)?);
-        if k > 0 {
-            ips.push(batch as f64 / t0.elapsed().as_secs_f64());
+    let mut reference = Vec::new();
+    for precision in [Precision::F32, Precision::Bf16] {
+        let engine = plain.clone().with_precision(precision);
+        let mut ips = Vec::new();
+        let mut y = Vec::new();
+        for k in 0..=repeats {
+            let t0 = std::time::Instant::now();
+            y = std::hint::black_box(engine.forward(&x, batch, rows, cols)?);
+            if k > 0 {
+                ips.push(batch as f64 / t0.elapsed().as_secs_f64());
+            }
+        }
+        match precision {
+            Precision::F32 => {
+                reference = y;
+                out.push(record("plain", ips));
+            }
+            Precision::Bf16 => {
+                let mut r = record("plain-bf16", ips);
+                r.relative_rms_difference = Some(relative_rms_difference(&y, &reference));
+                out.push(r);
+            }
         }
     }
-    out.push(record("plain", ips));
     if with_burn {
         let mut ips = Vec::new();
         for k in 0..=repeats {

@@ -14,7 +14,35 @@ use ocm_learn::unet::ConvBlock;
 use ocm_learn::{UNet, values};
 use rayon::prelude::*;
 
+use super::bf16;
 use crate::{Result, TactileError};
+use serde::{Deserialize, Serialize};
+
+/// Arithmetic of the plain engine's convolutions.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    /// `f32` throughout (faer's kernels), the same values as burn's graph to round-off.
+    #[default]
+    F32,
+    /// Every convolution after the first with bfloat16 weights and inputs and `f32` sums
+    /// (AVX-512 BF16 where the CPU has it); the first convolution, on the image itself, the
+    /// 1 x 1 head, normalisations and activations stay `f32`.
+    Bf16,
+}
+
+impl std::str::FromStr for Precision {
+    type Err = TactileError;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "f32" => Ok(Precision::F32),
+            "bf16" => Ok(Precision::Bf16),
+            other => Err(TactileError::Input(format!(
+                "precision must be f32 or bf16, got {other:?}"
+            ))),
+        }
+    }
+}
 
 /// A feature map of one image, channel-last, with a one-pixel zero border and two spare pixels
 /// at the end (the last row of the shifted views reads two pixels past the border).
@@ -26,37 +54,74 @@ struct Map {
     data: Vec<f32>,
 }
 
-thread_local! {
-    /// Buffers of dropped maps and products on this thread, reused: a full-size image
-    /// allocates tens of MB per layer, and fresh pages from the system (page faults, zeroing)
-    /// cost about as much as the arithmetic.
-    static POOL: std::cell::RefCell<Vec<Vec<f32>>> = const { std::cell::RefCell::new(Vec::new()) };
-}
+/// Buffers of dropped maps and products on one thread, reused: a full-size image allocates
+/// tens of MB per layer, and fresh pages from the system (page faults, zeroing) cost about as
+/// much as the arithmetic.
+struct Pool<T>(std::cell::RefCell<Vec<Vec<T>>>);
 
-/// A buffer of `n` values from the pool, contents unspecified (every user overwrites it).
-fn take(n: usize) -> Vec<f32> {
-    let mut v = POOL
-        .with(|p| {
-            let mut p = p.borrow_mut();
+impl<T: Copy + Default> Pool<T> {
+    const fn new() -> Self {
+        Pool(std::cell::RefCell::new(Vec::new()))
+    }
+
+    /// A buffer of `n` values, contents unspecified (every user overwrites it).
+    fn take(&self, n: usize) -> Vec<T> {
+        let mut v = {
+            let mut p = self.0.borrow_mut();
             let best = (0..p.len())
                 .filter(|&i| p[i].capacity() >= n)
                 .min_by_key(|&i| p[i].capacity())
                 .or_else(|| (0..p.len()).max_by_key(|&i| p[i].capacity()));
             best.map(|i| p.swap_remove(i))
-        })
+        }
         .unwrap_or_default();
-    v.resize(n, 0.0);
-    v
-}
+        v.resize(n, T::default());
+        v
+    }
 
-/// Returns a buffer to the pool (at most 16 are kept).
-fn give(v: Vec<f32>) {
-    POOL.with(|p| {
-        let mut p = p.borrow_mut();
+    /// Returns a buffer (at most 16 are kept).
+    fn give(&self, v: Vec<T>) {
+        let mut p = self.0.borrow_mut();
         if p.len() < 16 {
             p.push(v);
         }
-    });
+    }
+}
+
+thread_local! {
+    static POOL: Pool<f32> = const { Pool::new() };
+    static POOL_BF16: Pool<u16> = const { Pool::new() };
+}
+
+/// A pooled buffer of `n` values, contents unspecified.
+fn take(n: usize) -> Vec<f32> {
+    POOL.with(|p| p.take(n))
+}
+
+/// Returns a buffer to the pool.
+fn give(v: Vec<f32>) {
+    POOL.with(|p| p.give(v));
+}
+
+/// A map's values rounded to bfloat16 (same layout, two zeros appended: a pair read past an
+/// odd row stays inside), in a pooled buffer.
+struct HalfMap(Vec<u16>);
+
+impl HalfMap {
+    fn of(x: &Map) -> Self {
+        let n = x.data.len();
+        let mut v = POOL_BF16.with(|p| p.take(n + 2));
+        bf16::convert(&x.data, &mut v[..n]);
+        v[n..].fill(0);
+        HalfMap(v)
+    }
+}
+
+impl Drop for HalfMap {
+    fn drop(&mut self) {
+        let v = std::mem::take(&mut self.0);
+        POOL_BF16.with(|p| p.give(v));
+    }
 }
 
 impl Drop for Map {
@@ -115,6 +180,8 @@ impl Map {
 struct Conv3Part {
     c_in: usize,
     taps: [Vec<f32>; 3],
+    /// The taps packed for the bfloat16 kernel ([`Precision::Bf16`]).
+    packed: Option<[bf16::Packed; 3]>,
 }
 
 /// Convolution, normalisation and nonlinearity of one level.
@@ -139,6 +206,8 @@ struct Up {
     c_out: usize,
     weight: Vec<f32>,
     bias: Vec<f32>,
+    /// The weight packed for the bfloat16 kernel ([`Precision::Bf16`]).
+    packed: Option<bf16::Packed>,
 }
 
 /// The U-Net's weights as plain values (see the module documentation).
@@ -152,6 +221,7 @@ pub struct PlainUNet {
     /// 1 x 1 head, `[c, output]` row-major.
     head: Vec<f32>,
     head_bias: Vec<f32>,
+    precision: Precision,
 }
 
 fn bias_of(conv: &Conv2d, c_out: usize) -> Vec<f32> {
@@ -226,7 +296,11 @@ impl Block {
                 }
                 t
             });
-            parts.push(Conv3Part { c_in: ci_n, taps });
+            parts.push(Conv3Part {
+                c_in: ci_n,
+                taps,
+                packed: None,
+            });
             offset += ci_n;
         }
         let group = match &b.group {
@@ -260,25 +334,52 @@ impl Block {
         // columns per row landing on the border, which is zeroed afterwards.
         let mut out = Map::uninit(h, w, c_out);
         let start = (pw + 1) * c_out;
-        let mut accum = Accum::Replace;
-        for (part, x) in self.parts.iter().zip(inputs) {
-            let c = part.c_in;
-            debug_assert_eq!(x.c, c);
-            for (dy, tap) in part.taps.iter().enumerate() {
-                // Row q of this view is the 3 x c values of the pixels (r + dy, col .. col + 3)
-                // of the padded input, consecutive rows overlapping by 2 c. faer checks that
-                // the last element, (m - 1) c + 3 c - 1 past the start, lies in the slice (the
-                // map keeps 2 spare pixels for dy = 2).
-                let a =
-                    MatRef::from_row_major_slice_with_stride(&x.data[dy * pw * c..], m, 3 * c, c);
-                let b = MatRef::from_row_major_slice(tap, 3 * c, c_out);
-                let dst = MatMut::from_row_major_slice_mut(
-                    &mut out.data[start..start + m * c_out],
-                    m,
-                    c_out,
-                );
-                matmul(dst, accum, a, b, 1.0f32, par);
-                accum = Accum::Add;
+        let dst = &mut out.data[start..start + m * c_out];
+        if self.parts.iter().all(|p| p.packed.is_some()) {
+            // The same shifted views as below, over bfloat16 copies of the inputs, summed in
+            // one fused product.
+            let halves: Vec<HalfMap> = inputs.iter().map(|x| HalfMap::of(x)).collect();
+            let mut terms = Vec::with_capacity(3 * self.parts.len());
+            for ((part, x), half) in self.parts.iter().zip(inputs).zip(&halves) {
+                let c = part.c_in;
+                debug_assert_eq!(x.c, c);
+                for (dy, b) in part.packed.iter().flatten().enumerate() {
+                    terms.push(bf16::Term {
+                        src: &half.0,
+                        offset: dy * pw * c,
+                        stride: c,
+                        b,
+                    });
+                }
+            }
+            bf16::product(&terms, m, dst, matches!(par, Par::Rayon(_)));
+        } else {
+            let mut accum = Accum::Replace;
+            for (part, x) in self.parts.iter().zip(inputs) {
+                let c = part.c_in;
+                debug_assert_eq!(x.c, c);
+                for (dy, tap) in part.taps.iter().enumerate() {
+                    // Row q of this view is the 3 x c values of the pixels (r + dy, col .. col
+                    // + 3) of the padded input, consecutive rows overlapping by 2 c. faer
+                    // checks that the last element, (m - 1) c + 3 c - 1 past the start, lies
+                    // in the slice (the map keeps 2 spare pixels for dy = 2).
+                    let a = MatRef::from_row_major_slice_with_stride(
+                        &x.data[dy * pw * c..],
+                        m,
+                        3 * c,
+                        c,
+                    );
+                    let b = MatRef::from_row_major_slice(tap, 3 * c, c_out);
+                    matmul(
+                        MatMut::from_row_major_slice_mut(dst, m, c_out),
+                        accum,
+                        a,
+                        b,
+                        1.0f32,
+                        par,
+                    );
+                    accum = Accum::Add;
+                }
             }
         }
         out.zero_border();
@@ -474,6 +575,7 @@ impl Up {
             c_out,
             weight,
             bias,
+            packed: None,
         })
     }
 
@@ -482,17 +584,28 @@ impl Up {
         let (ci, co) = (self.c_in, self.c_out);
         // Every pixel of the interior rows (borders included, they are zero) times the weights.
         let m = h * pw;
-        let a = MatRef::from_row_major_slice(&x.data[pw * ci..(pw + m) * ci], m, ci);
-        let b = MatRef::from_row_major_slice(&self.weight, ci, 4 * co);
         let mut acc = take(m * 4 * co);
-        matmul(
-            MatMut::from_row_major_slice_mut(&mut acc, m, 4 * co),
-            Accum::Replace,
-            a,
-            b,
-            1.0f32,
-            par,
-        );
+        if let Some(b) = &self.packed {
+            let half = HalfMap::of(x);
+            let term = bf16::Term {
+                src: &half.0,
+                offset: pw * ci,
+                stride: ci,
+                b,
+            };
+            bf16::product(&[term], m, &mut acc, matches!(par, Par::Rayon(_)));
+        } else {
+            let a = MatRef::from_row_major_slice(&x.data[pw * ci..(pw + m) * ci], m, ci);
+            let b = MatRef::from_row_major_slice(&self.weight, ci, 4 * co);
+            matmul(
+                MatMut::from_row_major_slice_mut(&mut acc, m, 4 * co),
+                Accum::Replace,
+                a,
+                b,
+                1.0f32,
+                par,
+            );
+        }
         let mut out = Map::uninit(2 * h, 2 * w, co);
         for r in 0..h {
             for col in 0..w {
@@ -556,7 +669,32 @@ impl PlainUNet {
             merge,
             head,
             head_bias: bias_of(&net.head, output),
+            precision: Precision::F32,
         })
+    }
+
+    /// The same network with its convolutions in `precision` (see [`Precision`]).
+    pub fn with_precision(mut self, precision: Precision) -> Self {
+        let bf = precision == Precision::Bf16;
+        for blk in self.down.iter_mut().skip(1).chain(&mut self.merge) {
+            let c_out = blk.c_out;
+            for part in &mut blk.parts {
+                let c = part.c_in;
+                part.packed = bf.then(|| {
+                    std::array::from_fn(|dy| bf16::Packed::new(&part.taps[dy], 3 * c, c_out))
+                });
+            }
+        }
+        for u in &mut self.up {
+            u.packed = bf.then(|| bf16::Packed::new(&u.weight, u.c_in, 4 * u.c_out));
+        }
+        self.precision = precision;
+        self
+    }
+
+    /// The arithmetic of the convolutions.
+    pub fn precision(&self) -> Precision {
+        self.precision
     }
 
     /// Output channels.
@@ -732,6 +870,51 @@ mod tests {
 
     /// erf by its Maclaurin series in f64 (for |z| <= 3.6 the largest term is below 1e6, so the
     /// sum keeps about 1e-10).
+    /// The bfloat16 engine against the f32 one: the rounding of weights and activations (2^-8
+    /// relative at most per value, random in sign) moves the outputs by a fraction of a
+    /// percent, never more than 2 %, and switching back to f32 restores the f32 values bit for
+    /// bit.
+    #[test]
+    fn bf16_engine_stays_within_its_rounding() {
+        let dev = ocm_learn::cpu();
+        for cfg in [NetConfig::perception(24, 32), NetConfig::rendering(16, 40)] {
+            let mut net = cfg.init(&dev, 9).unwrap();
+            perturb_norms(&mut net, &dev);
+            let plain = PlainUNet::new(&net).unwrap();
+            let (rows, cols, c) = (cfg.rows, cfg.cols, cfg.unet.input);
+            let x = wave(2 * c * rows * cols, 2, 1.0, 0.1);
+            let want = plain.forward(&x, 2, rows, cols).unwrap();
+            let half = plain.clone().with_precision(Precision::Bf16);
+            assert_eq!(half.precision(), Precision::Bf16);
+            let got = half.forward(&x, 2, rows, cols).unwrap();
+            let rel = crate::nets::bench::relative_rms_difference(&got, &want);
+            let scale = want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+            let worst = got
+                .iter()
+                .zip(&want)
+                .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+            assert!(
+                rel > 1e-5 && rel < 0.02 && worst < 0.05 * scale,
+                "{:?}: relative RMS {rel}, worst {worst} of {scale}",
+                cfg.kind
+            );
+            let back = half.with_precision(Precision::F32);
+            assert_eq!(back.forward(&x, 2, rows, cols).unwrap(), want);
+            // One image alone runs its products on the pool instead: the same values.
+            let one = plain.clone().with_precision(Precision::Bf16);
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(2)
+                .build()
+                .unwrap();
+            let first = pool
+                .install(|| one.forward(&x[..c * rows * cols], 1, rows, cols))
+                .unwrap();
+            assert_eq!(first, got[..first.len()]);
+        }
+        assert!("bf16".parse::<Precision>().unwrap() == Precision::Bf16);
+        assert!("f16".parse::<Precision>().is_err());
+    }
+
     fn erf_series(z: f64) -> f64 {
         let (mut term, mut sum) = (z, 0.0);
         for n in 0..200 {

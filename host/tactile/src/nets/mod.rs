@@ -4,6 +4,7 @@
 //! ([`pairs`]).
 
 pub mod bench;
+pub mod bf16;
 pub mod force;
 pub mod infer;
 pub mod pairs;
@@ -419,10 +420,17 @@ impl NetData {
         }
     }
 
-    /// [`NetData::predict`] on the plain engine; `None` when it does not take this network
+    /// [`NetData::predict_in`] on the plain engine; `None` when it does not take this network
     /// or input (then burn's graph decides).
-    fn predict_plain(&self, net: &UNet, idx: &[usize], chunk: usize) -> Option<Vec<f32>> {
-        self.predict_on(&infer::PlainUNet::new(net).ok()?, idx, chunk)
+    fn predict_plain(
+        &self,
+        net: &UNet,
+        idx: &[usize],
+        chunk: usize,
+        precision: infer::Precision,
+    ) -> Option<Vec<f32>> {
+        let plain = infer::PlainUNet::new(net).ok()?.with_precision(precision);
+        self.predict_on(&plain, idx, chunk)
     }
 
     /// [`NetData::predict`] on an engine built once by the caller (a loop over single
@@ -460,8 +468,21 @@ impl NetData {
     /// device it runs on the plain engine ([`infer::PlainUNet`], the same values several times
     /// faster), on one through burn's graph.
     pub fn predict(&self, net: &UNet, idx: &[usize], chunk: usize, device: &Device) -> Vec<f32> {
+        self.predict_in(net, idx, chunk, device, infer::Precision::F32)
+    }
+
+    /// [`NetData::predict`] with the plain engine's convolutions in `precision` (burn's graph,
+    /// on an autodiff device or where the plain engine does not apply, is always `f32`).
+    pub fn predict_in(
+        &self,
+        net: &UNet,
+        idx: &[usize],
+        chunk: usize,
+        device: &Device,
+        precision: infer::Precision,
+    ) -> Vec<f32> {
         if let Some(out) = (!device.is_autodiff())
-            .then(|| self.predict_plain(net, idx, chunk))
+            .then(|| self.predict_plain(net, idx, chunk, precision))
             .flatten()
         {
             return out;

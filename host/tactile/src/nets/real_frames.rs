@@ -233,6 +233,8 @@ pub struct RealOptions {
     /// centroid offset over the even frames (a registration of the network's path fitted on
     /// half the depths; the odd frames are the score).
     pub shift_fit: bool,
+    /// Arithmetic of the network's convolutions.
+    pub precision: super::infer::Precision,
 }
 
 impl Default for RealOptions {
@@ -244,6 +246,7 @@ impl Default for RealOptions {
             mask: MaskOptions::default(),
             step_m: 10e-6,
             shift_fit: false,
+            precision: super::infer::Precision::F32,
         }
     }
 }
@@ -342,7 +345,7 @@ pub fn perceive_real(
     };
     let data = NetData::new(NetKind::Perception, &batch);
     let idx: Vec<usize> = (0..k).collect();
-    let pred = data.predict(net, &idx, 8, device);
+    let pred = data.predict_in(net, &idx, 8, device, opts.precision);
     let px_per_m = fitted.map.px_per_m;
     let area = |m: &Mask| m.count() as f64 / (px_per_m * px_per_m) * 1e6;
     let mut masks = Vec::new();
