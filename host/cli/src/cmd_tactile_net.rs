@@ -175,8 +175,8 @@ pub struct PerceiveArgs {
     #[arg(long, default_value = "out/tactile/perceive")]
     pub out: PathBuf,
     /// Arithmetic of the network's convolutions: f32, or bf16 (bfloat16 weights and
-    /// activations with f32 sums after the first convolution; on CPUs with AVX-512 BF16 about
-    /// 1.7 times the images per second, outputs within about 1 % RMS of f32's).
+    /// activations with f32 sums; on CPUs with AVX-512 BF16 about 1.7 times the images per
+    /// second, outputs within about 1 % RMS of f32's).
     #[arg(long, default_value = "f32")]
     pub precision: nets::infer::Precision,
     /// Print JSON.

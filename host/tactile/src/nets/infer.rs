@@ -25,9 +25,10 @@ pub enum Precision {
     /// `f32` throughout (faer's kernels), the same values as burn's graph to round-off.
     #[default]
     F32,
-    /// Every convolution after the first with bfloat16 weights and inputs and `f32` sums
-    /// (AVX-512 BF16 where the CPU has it); the first convolution, on the image itself, the
-    /// 1 x 1 head, normalisations and activations stay `f32`.
+    /// The 3 x 3 convolutions and the upsamplings with bfloat16 weights and inputs and `f32`
+    /// sums (AVX-512 BF16 where the CPU has it); the 1 x 1 head, normalisations and
+    /// activations stay `f32`. The perception network's input, grey-level differences over
+    /// 32, is exact in bfloat16 (integers up to 256 are).
     Bf16,
 }
 
@@ -108,10 +109,18 @@ fn give(v: Vec<f32>) {
 struct HalfMap(Vec<u16>);
 
 impl HalfMap {
-    fn of(x: &Map) -> Self {
+    fn of(x: &Map, par: Par) -> Self {
         let n = x.data.len();
         let mut v = POOL_BF16.with(|p| p.take(n + 2));
-        bf16::convert(&x.data, &mut v[..n]);
+        if matches!(par, Par::Rayon(_)) {
+            const CHUNK: usize = 1 << 16;
+            v[..n]
+                .par_chunks_mut(CHUNK)
+                .zip(x.data.par_chunks(CHUNK))
+                .for_each(|(d, s)| bf16::convert(s, d));
+        } else {
+            bf16::convert(&x.data, &mut v[..n]);
+        }
         v[n..].fill(0);
         HalfMap(v)
     }
@@ -159,18 +168,52 @@ impl Map {
     }
 
     /// From one `[c, h, w]` image.
-    fn from_chw(x: &[f32], c: usize, h: usize, w: usize) -> Self {
+    fn from_chw(x: &[f32], c: usize, h: usize, w: usize, par: Par) -> Self {
         let mut m = Map::uninit(h, w, c);
-        for r in 0..h {
-            for col in 0..w {
-                let o = m.at(r, col);
-                for ch in 0..c {
-                    m.data[o + ch] = x[(ch * h + r) * w + col];
+        m.zero_border();
+        m.for_rows(par, |r, row| {
+            for (col, px) in row.chunks_exact_mut(c).enumerate() {
+                for (ch, v) in px.iter_mut().enumerate() {
+                    *v = x[(ch * h + r) * w + col];
                 }
             }
-        }
-        m.zero_border();
+        });
         m
+    }
+
+    /// Calls `f(r, values)` on the `w c` values of every interior row r, the rows in parallel
+    /// on the current pool when `par` is a pool (one image's layers, whose products already
+    /// run there; the passes between them were a third of a single image's time).
+    fn for_rows(&mut self, par: Par, f: impl Fn(usize, &mut [f32]) + Sync + Send) {
+        self.map_rows(par, f);
+    }
+
+    /// [`Map::for_rows`] collecting what `f` returns per row, in row order.
+    fn map_rows<T: Send>(
+        &mut self,
+        par: Par,
+        f: impl Fn(usize, &mut [f32]) -> T + Sync + Send,
+    ) -> Vec<T> {
+        let (h, w, c) = (self.h, self.w, self.c);
+        let body = |(r, row): (usize, &mut [f32])| f(r, &mut row[c..(w + 1) * c]);
+        let width = (w + 2) * c;
+        if matches!(par, Par::Rayon(_)) {
+            self.data
+                .par_chunks_mut(width)
+                .skip(1)
+                .take(h)
+                .enumerate()
+                .map(body)
+                .collect()
+        } else {
+            self.data
+                .chunks_mut(width)
+                .skip(1)
+                .take(h)
+                .enumerate()
+                .map(body)
+                .collect()
+        }
     }
 }
 
@@ -338,7 +381,7 @@ impl Block {
         if self.parts.iter().all(|p| p.packed.is_some()) {
             // The same shifted views as below, over bfloat16 copies of the inputs, summed in
             // one fused product.
-            let halves: Vec<HalfMap> = inputs.iter().map(|x| HalfMap::of(x)).collect();
+            let halves: Vec<HalfMap> = inputs.iter().map(|x| HalfMap::of(x, par)).collect();
             let mut terms = Vec::with_capacity(3 * self.parts.len());
             for ((part, x), half) in self.parts.iter().zip(inputs).zip(&halves) {
                 let c = part.c_in;
@@ -384,19 +427,23 @@ impl Block {
         }
         out.zero_border();
         let bias = &self.bias;
+        let c = c_out;
         match (&self.group, self.activation) {
-            (None, Activation::Relu) => out.each_pixel(|px| {
-                for (v, b) in px.iter_mut().zip(bias) {
-                    *v = (*v + b).max(0.0);
+            (None, Activation::Relu) => out.for_rows(par, |_, row| {
+                for px in row.chunks_exact_mut(c) {
+                    for (v, b) in px.iter_mut().zip(bias) {
+                        *v = (*v + b).max(0.0);
+                    }
                 }
             }),
-            (None, act) => {
-                out.each_pixel(|px| px.iter_mut().zip(bias).for_each(|(v, b)| *v += b));
-                activate(&mut out.data, act);
-            }
+            (None, act) => out.for_rows(par, |_, row| {
+                for px in row.chunks_exact_mut(c) {
+                    px.iter_mut().zip(bias).for_each(|(v, b)| *v += b);
+                }
+                activate(row, act);
+            }),
             (Some((groups, gamma, beta, eps)), act) => {
-                group_norm(&mut out, bias, *groups, gamma, beta, *eps);
-                activate(&mut out.data, act);
+                group_norm(&mut out, bias, *groups, gamma, beta, *eps, act, par);
             }
         }
         out
@@ -412,33 +459,42 @@ fn activate(v: &mut [f32], act: Activation) {
     }
 }
 
-impl Map {
-    /// Calls `f` on the channels of every interior pixel.
-    fn each_pixel(&mut self, mut f: impl FnMut(&mut [f32])) {
-        let (w, c) = (self.w, self.c);
-        for r in 0..self.h {
-            let o = self.at(r, 0);
-            self.data[o..o + w * c].chunks_exact_mut(c).for_each(&mut f);
-        }
-    }
-}
-
-/// Adds `bias` and applies group normalisation over the interior pixels, in place: per group
-/// of channels, mean and variance over all its values (as burn's `GroupNorm`, the sums in
-/// f64), then the per-channel affine map.
-fn group_norm(x: &mut Map, bias: &[f32], groups: usize, gamma: &[f32], beta: &[f32], eps: f32) {
+/// Adds `bias`, applies group normalisation over the interior pixels (per group of channels,
+/// mean and variance over all its values, as burn's `GroupNorm`; the sums in f64, per row and
+/// then over the rows in order, so one image on the pool and a batch agree) and the
+/// per-channel affine map, then `act`, in place.
+#[allow(clippy::too_many_arguments)]
+fn group_norm(
+    x: &mut Map,
+    bias: &[f32],
+    groups: usize,
+    gamma: &[f32],
+    beta: &[f32],
+    eps: f32,
+    act: Activation,
+    par: Par,
+) {
     let (c, cg) = (x.c, x.c / groups);
     let n = (x.h * x.w * cg) as f64;
+    let rows = x.map_rows(par, |_, row| {
+        let mut sum = vec![0.0f64; c];
+        let mut sq = vec![0.0f64; c];
+        for px in row.chunks_exact_mut(c) {
+            for (((v, b), s), q) in px.iter_mut().zip(bias).zip(&mut sum).zip(&mut sq) {
+                *v += b;
+                let v = f64::from(*v);
+                *s += v;
+                *q += v * v;
+            }
+        }
+        (sum, sq)
+    });
     let mut sum = vec![0.0f64; c];
     let mut sq = vec![0.0f64; c];
-    x.each_pixel(|px| {
-        for (((v, b), s), q) in px.iter_mut().zip(bias).zip(&mut sum).zip(&mut sq) {
-            *v += b;
-            let v = f64::from(*v);
-            *s += v;
-            *q += v * v;
-        }
-    });
+    for (rs, rq) in &rows {
+        sum.iter_mut().zip(rs).for_each(|(a, b)| *a += b);
+        sq.iter_mut().zip(rq).for_each(|(a, b)| *a += b);
+    }
     let mut scale = vec![0.0f32; c];
     let mut shift = vec![0.0f32; c];
     for g in 0..groups {
@@ -450,10 +506,13 @@ fn group_norm(x: &mut Map, bias: &[f32], groups: usize, gamma: &[f32], beta: &[f
             shift[ch] = (f64::from(beta[ch]) - mean * inv * f64::from(gamma[ch])) as f32;
         }
     }
-    x.each_pixel(|px| {
-        for ((v, s), t) in px.iter_mut().zip(&scale).zip(&shift) {
-            *v = *v * s + t;
+    x.for_rows(par, |_, row| {
+        for px in row.chunks_exact_mut(c) {
+            for ((v, s), t) in px.iter_mut().zip(&scale).zip(&shift) {
+                *v = *v * s + t;
+            }
         }
+        activate(row, act);
     });
 }
 
@@ -520,22 +579,21 @@ fn gelu_inline(v: &mut [f32]) {
     }
 }
 
-fn max_pool(x: &Map) -> Map {
+fn max_pool(x: &Map, par: Par) -> Map {
     let (h, w, c) = (x.h / 2, x.w / 2, x.c);
     let mut out = Map::uninit(h, w, c);
-    for r in 0..h {
-        for col in 0..w {
-            let o = out.at(r, col);
+    out.zero_border();
+    out.for_rows(par, |r, row| {
+        for (col, px) in row.chunks_exact_mut(c).enumerate() {
             let (a, b) = (x.at(2 * r, 2 * col), x.at(2 * r + 1, 2 * col));
-            for ch in 0..c {
-                out.data[o + ch] = x.data[a + ch]
+            for (ch, v) in px.iter_mut().enumerate() {
+                *v = x.data[a + ch]
                     .max(x.data[a + c + ch])
                     .max(x.data[b + ch])
                     .max(x.data[b + c + ch]);
             }
         }
-    }
-    out.zero_border();
+    });
     out
 }
 
@@ -586,7 +644,7 @@ impl Up {
         let m = h * pw;
         let mut acc = take(m * 4 * co);
         if let Some(b) = &self.packed {
-            let half = HalfMap::of(x);
+            let half = HalfMap::of(x, par);
             let term = bf16::Term {
                 src: &half.0,
                 offset: pw * ci,
@@ -607,23 +665,21 @@ impl Up {
             );
         }
         let mut out = Map::uninit(2 * h, 2 * w, co);
-        for r in 0..h {
-            for col in 0..w {
-                let src = &acc[(r * pw + col + 1) * 4 * co..][..4 * co];
-                for k in 0..4 {
-                    let o = out.at(2 * r + k / 2, 2 * col + k % 2);
-                    for ((d, s), b) in out.data[o..o + co]
-                        .iter_mut()
-                        .zip(&src[k * co..(k + 1) * co])
-                        .zip(&self.bias)
-                    {
-                        *d = s + b;
-                    }
+        out.zero_border();
+        let bias = &self.bias;
+        // Output row R comes from input row R / 2, kernel row R % 2.
+        out.for_rows(par, |rr, row| {
+            let (r, ky) = (rr / 2, rr % 2);
+            for (cc, px) in row.chunks_exact_mut(co).enumerate() {
+                let (col, kx) = (cc / 2, cc % 2);
+                let k = 2 * ky + kx;
+                let src = &acc[(r * pw + col + 1) * 4 * co + k * co..][..co];
+                for ((d, s), b) in px.iter_mut().zip(src).zip(bias) {
+                    *d = s + b;
                 }
             }
-        }
+        });
         give(acc);
-        out.zero_border();
         out
     }
 }
@@ -676,7 +732,7 @@ impl PlainUNet {
     /// The same network with its convolutions in `precision` (see [`Precision`]).
     pub fn with_precision(mut self, precision: Precision) -> Self {
         let bf = precision == Precision::Bf16;
-        for blk in self.down.iter_mut().skip(1).chain(&mut self.merge) {
+        for blk in self.down.iter_mut().chain(&mut self.merge) {
             let c_out = blk.c_out;
             for part in &mut blk.parts {
                 let c = part.c_in;
@@ -705,12 +761,12 @@ impl PlainUNet {
     /// One `[input, h, w]` image to `[output, h, w]`, matrix products on `par` threads.
     fn forward_one(&self, x: &[f32], h: usize, w: usize, par: Par) -> Vec<f32> {
         let mut levels: Vec<Map> = Vec::with_capacity(self.down.len());
-        let first = Map::from_chw(x, self.input, h, w);
+        let first = Map::from_chw(x, self.input, h, w, par);
         for (l, b) in self.down.iter().enumerate() {
             let y = if l == 0 {
                 b.forward(&[&first], par)
             } else {
-                b.forward(&[&max_pool(&levels[l - 1])], par)
+                b.forward(&[&max_pool(&levels[l - 1], par)], par)
             };
             levels.push(y);
         }
