@@ -120,6 +120,10 @@ pub struct TrainNetArgs {
     /// validation samples, and score the held-out ones at it (the true masks stay at 30 um).
     #[arg(long, requires = "score_only")]
     pub fit_threshold: bool,
+    /// Arithmetic of the plain engine's convolutions when scoring (training itself runs in
+    /// f32 on burn): f32, or bf16 (see `ocm tactile perceive --precision`).
+    #[arg(long, default_value = "f32")]
+    pub precision: nets::infer::Precision,
     /// Print the JSON summary.
     #[arg(long)]
     pub json: bool,
@@ -321,8 +325,16 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
     let example = |k: usize| held[(k * held.len()) / 3 + held.len() / 6];
     let (held_scores, val_scores) = match kind {
         NetKind::Perception => {
-            let (h, pred) = nets::score_perception(&report.model, &data, &pairs, &held, &dev)?;
-            let (v, _) = nets::score_perception(&report.model, &data, &pairs, &split.val, &dev)?;
+            let (h, pred) =
+                nets::score_perception(&report.model, &data, &pairs, &held, &dev, a.precision)?;
+            let (v, _) = nets::score_perception(
+                &report.model,
+                &data,
+                &pairs,
+                &split.val,
+                &dev,
+                a.precision,
+            )?;
             let n = pairs.pixels();
             for k in 0..3.min(held.len()) {
                 let i = example(k);
@@ -342,8 +354,10 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
             (serde_json::to_value(h)?, serde_json::to_value(v)?)
         }
         NetKind::Rendering => {
-            let (h, frames) = nets::score_rendering(&report.model, &data, &pairs, &held, &dev)?;
-            let (v, _) = nets::score_rendering(&report.model, &data, &pairs, &split.val, &dev)?;
+            let (h, frames) =
+                nets::score_rendering(&report.model, &data, &pairs, &held, &dev, a.precision)?;
+            let (v, _) =
+                nets::score_rendering(&report.model, &data, &pairs, &split.val, &dev, a.precision)?;
             for k in 0..3.min(held.len()) {
                 let i = example(k);
                 let j = held.iter().position(|&x| x == i).unwrap_or(0);
@@ -386,6 +400,7 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
         "best_epoch": report.best_epoch,
         "best_val_loss": report.best_loss,
         "first_train_loss": report.curve.first().map(|r| r.train_loss),
+        "scored_in": a.precision,
         "held_out": held_scores,
         "validation": val_scores,
         "checkpoint": ckpt.display().to_string(),
@@ -459,8 +474,9 @@ fn score_only(
     let mut force_linear = serde_json::Value::Null;
     let (h, v) = match kind {
         NetKind::Perception => {
-            let (mut h, pred) = nets::score_perception(&net, data, pairs, held, &dev)?;
-            let (mut vs, vpred) = nets::score_perception(&net, data, pairs, val, &dev)?;
+            let (mut h, pred) = nets::score_perception(&net, data, pairs, held, &dev, a.precision)?;
+            let (mut vs, vpred) =
+                nets::score_perception(&net, data, pairs, val, &dev, a.precision)?;
             if a.fit_threshold {
                 let candidates: Vec<f64> = (0..=36).map(|k| 10e-6 + 2.5e-6 * k as f64).collect();
                 let (t, _) = nets::fit_threshold(&vpred, pairs, val, &candidates)?;
@@ -547,8 +563,12 @@ fn score_only(
             (serde_json::to_value(h)?, serde_json::to_value(vs)?)
         }
         NetKind::Rendering => (
-            serde_json::to_value(nets::score_rendering(&net, data, pairs, held, &dev)?.0)?,
-            serde_json::to_value(nets::score_rendering(&net, data, pairs, val, &dev)?.0)?,
+            serde_json::to_value(
+                nets::score_rendering(&net, data, pairs, held, &dev, a.precision)?.0,
+            )?,
+            serde_json::to_value(
+                nets::score_rendering(&net, data, pairs, val, &dev, a.precision)?.0,
+            )?,
         ),
     };
     let name = match kind {
@@ -559,6 +579,7 @@ fn score_only(
         "network": name,
         "checkpoint": ck.display().to_string(),
         "image": [pairs.rows, pairs.cols],
+        "scored_in": a.precision,
         "held_out": h,
         "validation": v,
         "surface_force": force,

@@ -687,9 +687,10 @@ pub fn score_perception(
     pairs: &Pairs,
     idx: &[usize],
     device: &Device,
+    precision: infer::Precision,
 ) -> Result<(PerceptionScores, Vec<f32>)> {
     let t0 = std::time::Instant::now();
-    let pred = data.predict(net, idx, 8, device);
+    let pred = data.predict_in(net, idx, 8, device, precision);
     let ips = idx.len() as f64 / t0.elapsed().as_secs_f64();
     let scores = score_predicted(&pred, pairs, idx, CONTACT_DZ_M, ips)?;
     Ok((scores, pred))
@@ -823,9 +824,10 @@ pub fn score_rendering(
     pairs: &Pairs,
     idx: &[usize],
     device: &Device,
+    precision: infer::Precision,
 ) -> Result<(RenderingScores, Vec<RgbImage>)> {
     let t0 = std::time::Instant::now();
-    let pred = data.predict(net, idx, 8, device);
+    let pred = data.predict_in(net, idx, 8, device, precision);
     let ips = idx.len() as f64 / t0.elapsed().as_secs_f64();
     let n = pairs.pixels();
     let grid = pairs.grid();
