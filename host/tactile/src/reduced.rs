@@ -1389,7 +1389,6 @@ mod tests {
         }
     }
 
-    /// The full FEM of a sphere pressed 8 x 25 um at `p`.
     /// A sphere on the block, its FEM (depths, fields, forces) and the rank-8 reduced model
     /// built from those fields alone.
     #[allow(clippy::type_complexity)]
@@ -1416,6 +1415,7 @@ mod tests {
         (gel, ind, p, depths, fields, force, m)
     }
 
+    /// The full FEM of a sphere pressed 8 x 25 um at `p`.
     fn fem(gel: &Gel, ind: &Indenter, p: Placement) -> (Vec<f64>, Vec<Vec<[f64; 3]>>, Vec<f64>) {
         let mut o = IndentOptions::protocol(gel.material.young_pa);
         o.steps = 8;

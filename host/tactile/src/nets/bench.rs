@@ -52,11 +52,28 @@ pub fn relative_rms_difference(y: &[f32], reference: &[f32]) -> f64 {
     (diff / spread.max(f64::MIN_POSITIVE)).sqrt()
 }
 
+/// Images per second of `repeats` timed calls of `run` on `batch` images, after one untimed
+/// warm-up call, and the last call's output.
+fn timed<T>(
+    repeats: usize,
+    batch: usize,
+    mut run: impl FnMut() -> Result<T>,
+) -> Result<(Vec<f64>, T)> {
+    let mut last = run()?;
+    let mut ips = Vec::with_capacity(repeats);
+    for _ in 0..repeats {
+        let t0 = std::time::Instant::now();
+        last = std::hint::black_box(run()?);
+        ips.push(batch as f64 / t0.elapsed().as_secs_f64());
+    }
+    Ok((ips, last))
+}
+
 /// Times `repeats` forward calls of a batch of `batch` images of `rows` x `cols` through a
 /// freshly initialised `kind` network (after one warm-up call), on the current rayon pool,
-/// with the plain engine in `f32` and in bfloat16 and, when `with_burn`, burn's graph; when `with_train`, also up to 2
-/// forward and backward passes on burn's autodiff device (engine "burn-train-step", images per
-/// second of training without the optimiser step).
+/// with the plain engine in `f32` and in bfloat16 and, when `with_burn`, burn's graph; when
+/// `with_train`, also up to 2 forward and backward passes on burn's autodiff device (engine
+/// "burn-train-step", images per second of training without the optimiser step).
 pub fn bench_inference(
     kind: NetKind,
     rows: usize,
@@ -90,43 +107,22 @@ pub fn bench_inference(
         images_per_s: ips,
         relative_rms_difference: None,
     };
-    let mut out = Vec::new();
     let plain = PlainUNet::new(&net)?;
-    let mut reference = Vec::new();
-    for precision in [Precision::F32, Precision::Bf16] {
-        let engine = plain.clone().with_precision(precision);
-        let mut ips = Vec::new();
-        let mut y = Vec::new();
-        for k in 0..=repeats {
-            let t0 = std::time::Instant::now();
-            y = std::hint::black_box(engine.forward(&x, batch, rows, cols)?);
-            if k > 0 {
-                ips.push(batch as f64 / t0.elapsed().as_secs_f64());
-            }
-        }
-        match precision {
-            Precision::F32 => {
-                reference = y;
-                out.push(record("plain", ips));
-            }
-            Precision::Bf16 => {
-                let mut r = record("plain-bf16", ips);
-                r.relative_rms_difference = Some(relative_rms_difference(&y, &reference));
-                out.push(r);
-            }
-        }
-    }
+    let (ips, reference) = timed(repeats, batch, || plain.forward(&x, batch, rows, cols))?;
+    let mut out = vec![record("plain", ips)];
+    let half = plain.with_precision(Precision::Bf16);
+    let (ips, y) = timed(repeats, batch, || half.forward(&x, batch, rows, cols))?;
+    out.push(NetBench {
+        relative_rms_difference: Some(relative_rms_difference(&y, &reference)),
+        ..record("plain-bf16", ips)
+    });
+    let input = || Tensor::<4>::from_data(TensorData::new(x.clone(), [batch, c, rows, cols]), &dev);
     if with_burn {
-        let mut ips = Vec::new();
-        for k in 0..=repeats {
-            let t =
-                Tensor::<4>::from_data(TensorData::new(x.clone(), [batch, c, rows, cols]), &dev);
-            let t0 = std::time::Instant::now();
-            std::hint::black_box(ocm_learn::values(net.forward(t)));
-            if k > 0 {
-                ips.push(batch as f64 / t0.elapsed().as_secs_f64());
-            }
-        }
+        let (ips, _) = timed(repeats, batch, || {
+            Ok(std::hint::black_box(ocm_learn::values(
+                net.forward(input()),
+            )))
+        })?;
         out.push(record("burn", ips));
     }
     if with_train {
@@ -134,17 +130,12 @@ pub fn bench_inference(
         // graph (batch statistics), the optimiser's update excluded.
         let dev = ocm_learn::cpu_autodiff();
         let net = cfg.init(&dev, 0)?;
-        let mut ips = Vec::new();
-        for k in 0..=repeats.min(2) {
+        let (ips, _) = timed(repeats.min(2), batch, || {
             let t =
                 Tensor::<4>::from_data(TensorData::new(x.clone(), [batch, c, rows, cols]), &dev);
-            let t0 = std::time::Instant::now();
             let loss = net.forward(t).powi_scalar(2).mean();
-            std::hint::black_box(loss.backward());
-            if k > 0 {
-                ips.push(batch as f64 / t0.elapsed().as_secs_f64());
-            }
-        }
+            Ok(std::hint::black_box(loss.backward()))
+        })?;
         out.push(record("burn-train-step", ips));
     }
     Ok(out)

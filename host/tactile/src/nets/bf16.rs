@@ -226,43 +226,31 @@ mod x86 {
     pub(super) unsafe fn rows(terms: &[Term], q0: usize, rows: usize, dst: &mut [f32]) {
         let b = terms[0].b;
         let vecs = b.n_pad / LANES;
-        let (mr, nv) = if vecs.is_multiple_of(4) {
-            (6, 4)
+        // (tile rows, column vectors, the whole-tile kernel, its one-row kernel)
+        let (mr, nv, tile, tail): (usize, usize, Tile, Tile) = if vecs.is_multiple_of(4) {
+            (6, 4, tile_6x4, tile_1x4)
         } else if vecs.is_multiple_of(2) {
-            (12, 2)
+            (12, 2, tile_12x2, tile_1x2)
         } else {
-            (12, 1)
+            (12, 1, tile_12x1, tile_1x1)
         };
         let whole = rows / mr * mr;
-        // SAFETY: every tile's rows lie in q0..q0 + rows and its columns in 0..n_pad (the
-        // stores are masked to n), as the caller guarantees.
-        unsafe {
-            for i in (0..whole).step_by(mr) {
-                for v0 in (0..vecs).step_by(nv) {
-                    let out = &mut dst[i * b.n..];
-                    for (k, t) in terms.iter().enumerate() {
-                        match nv {
-                            4 => tile_6x4(t, q0 + i, v0, out, k == 0),
-                            2 => tile_12x2(t, q0 + i, v0, out, k == 0),
-                            _ => tile_12x1(t, q0 + i, v0, out, k == 0),
-                        }
-                    }
-                }
-            }
-            for i in whole..rows {
-                for v0 in (0..vecs).step_by(nv) {
-                    let out = &mut dst[i * b.n..];
-                    for (k, t) in terms.iter().enumerate() {
-                        match nv {
-                            4 => tile_1x4(t, q0 + i, v0, out, k == 0),
-                            2 => tile_1x2(t, q0 + i, v0, out, k == 0),
-                            _ => tile_1x1(t, q0 + i, v0, out, k == 0),
-                        }
-                    }
+        let starts = (0..whole).step_by(mr).map(|i| (i, tile));
+        for (i, kernel) in starts.chain((whole..rows).map(|i| (i, tail))) {
+            for v0 in (0..vecs).step_by(nv) {
+                let out = &mut dst[i * b.n..];
+                for (k, t) in terms.iter().enumerate() {
+                    // SAFETY: the tile's rows lie in q0..q0 + rows and its columns in
+                    // 0..n_pad (the stores are masked to n), as the caller guarantees.
+                    unsafe { kernel(t, q0 + i, v0, out, k == 0) };
                 }
             }
         }
     }
+
+    /// A tile kernel: term, first row, first column vector, destination rows, whether the
+    /// tile starts from zero.
+    type Tile = unsafe fn(&Term, usize, usize, &mut [f32], bool);
 
     /// One row of a tile: the row's pair of A values broadcast, times each column vector.
     macro_rules! dot_row {

@@ -1,9 +1,10 @@
-//! Plain `f32` inference of a trained [`UNet`] for full-size images: the weights are copied out
-//! of the burn modules once (batch normalisation folded into the convolutions), each image runs
+//! Plain inference of a trained [`UNet`] for full-size images: the weights are copied out of
+//! the burn modules once (batch normalisation folded into the convolutions), each image runs
 //! channel-last with a one-pixel zero border, and every 3 x 3 convolution is three matrix
-//! products on overlapping views of that buffer (no im2col copy) through faer's kernels. Images
-//! of a batch run in parallel on the current rayon pool. It mirrors [`UNet::forward`] with
-//! running statistics (evaluation) and is tested against it.
+//! products on overlapping views of that buffer (no im2col copy), through faer's kernels in
+//! `f32` or the [`bf16`] kernel in bfloat16 ([`Precision`]). Images of a batch run in parallel
+//! on the current rayon pool; one image runs its products and the passes between them there.
+//! It mirrors [`UNet::forward`] with running statistics (evaluation) and is tested against it.
 
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
@@ -43,6 +44,11 @@ impl std::str::FromStr for Precision {
             ))),
         }
     }
+}
+
+/// Whether `par` runs on the rayon pool (one image's layers) rather than on this thread.
+fn on_pool(par: Par) -> bool {
+    matches!(par, Par::Rayon(_))
 }
 
 /// A feature map of one image, channel-last, with a one-pixel zero border and two spare pixels
@@ -112,7 +118,7 @@ impl HalfMap {
     fn of(x: &Map, par: Par) -> Self {
         let n = x.data.len();
         let mut v = POOL_BF16.with(|p| p.take(n + 2));
-        if matches!(par, Par::Rayon(_)) {
+        if on_pool(par) {
             const CHUNK: usize = 1 << 16;
             v[..n]
                 .par_chunks_mut(CHUNK)
@@ -197,7 +203,7 @@ impl Map {
         let (h, w, c) = (self.h, self.w, self.c);
         let body = |(r, row): (usize, &mut [f32])| f(r, &mut row[c..(w + 1) * c]);
         let width = (w + 2) * c;
-        if matches!(par, Par::Rayon(_)) {
+        if on_pool(par) {
             self.data
                 .par_chunks_mut(width)
                 .skip(1)
@@ -395,7 +401,7 @@ impl Block {
                     });
                 }
             }
-            bf16::product(&terms, m, dst, matches!(par, Par::Rayon(_)));
+            bf16::product(&terms, m, dst, on_pool(par));
         } else {
             let mut accum = Accum::Replace;
             for (part, x) in self.parts.iter().zip(inputs) {
@@ -429,6 +435,7 @@ impl Block {
         let bias = &self.bias;
         let c = c_out;
         match (&self.group, self.activation) {
+            // Bias and ReLU in one pass over the row (perception's every block).
             (None, Activation::Relu) => out.for_rows(par, |_, row| {
                 for px in row.chunks_exact_mut(c) {
                     for (v, b) in px.iter_mut().zip(bias) {
@@ -651,7 +658,7 @@ impl Up {
                 stride: ci,
                 b,
             };
-            bf16::product(&[term], m, &mut acc, matches!(par, Par::Rayon(_)));
+            bf16::product(&[term], m, &mut acc, on_pool(par));
         } else {
             let a = MatRef::from_row_major_slice(&x.data[pw * ci..(pw + m) * ci], m, ci);
             let b = MatRef::from_row_major_slice(&self.weight, ci, 4 * co);
@@ -872,6 +879,16 @@ mod tests {
         }
     }
 
+    /// The largest difference of `got` from `want`, and the largest magnitude of `want`.
+    fn worst_and_scale(got: &[f32], want: &[f32]) -> (f32, f32) {
+        let scale = want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let worst = got
+            .iter()
+            .zip(want)
+            .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+        (worst, scale)
+    }
+
     /// The plain forward pass equals burn's (evaluation mode) for both networks, one image
     /// and a parallel batch, at two sizes (12 x 20 has an odd-sized bottleneck, 3 x 5); a
     /// wrong input size is refused.
@@ -900,11 +917,7 @@ mod tests {
                     .install(|| plain.forward(&x, batch, rows, cols))
                     .unwrap();
                 assert_eq!(got.len(), want.len());
-                let scale = want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-                let err = got
-                    .iter()
-                    .zip(&want)
-                    .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+                let (err, scale) = worst_and_scale(&got, &want);
                 assert!(
                     err < 1e-4 * scale,
                     "{:?} batch {batch}: {err} of {scale}",
@@ -924,8 +937,6 @@ mod tests {
         }
     }
 
-    /// erf by its Maclaurin series in f64 (for |z| <= 3.6 the largest term is below 1e6, so the
-    /// sum keeps about 1e-10).
     /// The bfloat16 engine against the f32 one: the rounding of weights and activations (2^-8
     /// relative at most per value, random in sign) moves the outputs by a fraction of a
     /// percent, never more than 2 %, and switching back to f32 restores the f32 values bit for
@@ -944,33 +955,30 @@ mod tests {
             assert_eq!(half.precision(), Precision::Bf16);
             let got = half.forward(&x, 2, rows, cols).unwrap();
             let rel = crate::nets::bench::relative_rms_difference(&got, &want);
-            let scale = want.iter().fold(0.0f32, |m, v| m.max(v.abs()));
-            let worst = got
-                .iter()
-                .zip(&want)
-                .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+            let (worst, scale) = worst_and_scale(&got, &want);
             assert!(
                 rel > 1e-5 && rel < 0.02 && worst < 0.05 * scale,
                 "{:?}: relative RMS {rel}, worst {worst} of {scale}",
                 cfg.kind
             );
-            let back = half.with_precision(Precision::F32);
-            assert_eq!(back.forward(&x, 2, rows, cols).unwrap(), want);
             // One image alone runs its products on the pool instead: the same values.
-            let one = plain.clone().with_precision(Precision::Bf16);
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(2)
                 .build()
                 .unwrap();
             let first = pool
-                .install(|| one.forward(&x[..c * rows * cols], 1, rows, cols))
+                .install(|| half.forward(&x[..c * rows * cols], 1, rows, cols))
                 .unwrap();
             assert_eq!(first, got[..first.len()]);
+            let back = half.with_precision(Precision::F32);
+            assert_eq!(back.forward(&x, 2, rows, cols).unwrap(), want);
         }
         assert!("bf16".parse::<Precision>().unwrap() == Precision::Bf16);
         assert!("f16".parse::<Precision>().is_err());
     }
 
+    /// erf by its Maclaurin series in f64 (for |z| <= 3.6 the largest term is below 1e6, so the
+    /// sum keeps about 1e-10).
     fn erf_series(z: f64) -> f64 {
         let (mut term, mut sum) = (z, 0.0);
         for n in 0..200 {
