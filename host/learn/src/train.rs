@@ -116,6 +116,67 @@ where
     M: Module,
     F: Fn(&M, &[usize], &Device) -> Tensor<1>,
 {
+    let device = autodiff_device(&model)?;
+    let plain = device.clone().inner();
+    train_split_steps(
+        model,
+        split,
+        cfg,
+        |model, batch| {
+            let l = loss(model, batch, &device);
+            let value = f64::from(l.clone().detach().into_scalar::<f32>());
+            // A diverged loss has no gradients worth taking; the loop stops on its value.
+            let grads = if value.is_finite() {
+                GradientsParams::from_grads(l.backward(), model)
+            } else {
+                GradientsParams::new()
+            };
+            Ok((value, grads))
+        },
+        |valid, samples| {
+            Ok(evaluate(
+                valid,
+                samples,
+                cfg.batch_size.max(256),
+                &plain,
+                &loss,
+            ))
+        },
+    )
+}
+
+/// The device of `model`'s parameters, which must be an autodiff device.
+fn autodiff_device<M: Module>(model: &M) -> Result<Device> {
+    let device = model
+        .devices()
+        .into_iter()
+        .next()
+        .ok_or_else(|| LearnError::Config("the model has no parameters".into()))?;
+    if !device.is_autodiff() {
+        return Err(LearnError::Config(
+            "train needs a model built on an autodiff device (Device::autodiff)".into(),
+        ));
+    }
+    Ok(device)
+}
+
+/// [`train_split`] with the gradients computed by the caller: `step(model, batch)` returns the
+/// batch's mean loss and the gradients of the model's parameters (by `ParamId`, on the plain
+/// device), and `validate(model, samples)` the mean loss of the detached model over
+/// `samples`. For engines other than burn's autodiff (the optimiser, clipping, split,
+/// shuffling, early stopping and curve stay these).
+pub fn train_split_steps<M, S, V>(
+    model: M,
+    split: &Split,
+    cfg: &TrainConfig,
+    mut step: S,
+    validate: V,
+) -> Result<TrainReport<M>>
+where
+    M: Module,
+    S: FnMut(&M, &[usize]) -> Result<(f64, GradientsParams)>,
+    V: Fn(&M, &[usize]) -> Result<f64>,
+{
     if cfg.batch_size == 0 || cfg.epochs == 0 {
         return Err(LearnError::Config(
             "batch_size and epochs must be positive".into(),
@@ -130,17 +191,7 @@ where
     if split.train.is_empty() {
         return Err(LearnError::Data("no training samples".into()));
     }
-    let device = model
-        .devices()
-        .into_iter()
-        .next()
-        .ok_or_else(|| LearnError::Config("the model has no parameters".into()))?;
-    if !device.is_autodiff() {
-        return Err(LearnError::Config(
-            "train needs a model built on an autodiff device (Device::autodiff)".into(),
-        ));
-    }
-    let plain = device.clone().inner();
+    autodiff_device(&model)?;
     let mut optim = AdamConfig::new()
         .with_grad_clipping(
             cfg.grad_clip_norm
@@ -160,14 +211,12 @@ where
         order.shuffle(&mut rng);
         let mut sum = 0.0;
         for batch in order.chunks(cfg.batch_size) {
-            let l = loss(&model, batch, &device);
-            let value = f64::from(l.clone().detach().into_scalar::<f32>());
+            let (value, grads) = step(&model, batch)?;
             if !value.is_finite() {
                 bar.abandon();
                 return Err(LearnError::Diverged { epoch, loss: value });
             }
             sum += value * batch.len() as f64;
-            let grads = GradientsParams::from_grads(l.backward(), &model);
             model = optim.step(cfg.learning_rate, model, grads);
         }
         let train_loss = sum / order.len() as f64;
@@ -175,7 +224,7 @@ where
         let val_loss = if split.val.is_empty() {
             f64::NAN
         } else {
-            evaluate(&valid, &split.val, cfg.batch_size.max(256), &plain, &loss)
+            validate(&valid, &split.val)?
         };
         curve.push(EpochRecord {
             epoch,

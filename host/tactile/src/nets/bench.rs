@@ -13,7 +13,8 @@ pub struct NetBench {
     pub kind: NetKind,
     /// Which implementation: "burn" (the training graph on burn's CPU backend), "plain"
     /// ([`super::infer::PlainUNet`], what scoring and `ocm tactile perceive` use) or
-    /// "plain-bf16" (the same with [`Precision::Bf16`]).
+    /// "plain-bf16" (the same with [`Precision::Bf16`]); "burn-train-step" and
+    /// "plain-train-step" time a training step's forward and backward passes.
     pub engine: String,
     /// Image size (rows, cols).
     pub size: [usize; 2],
@@ -73,7 +74,8 @@ fn timed<T>(
 /// freshly initialised `kind` network (after one warm-up call), on the current rayon pool,
 /// with the plain engine in `f32` and in bfloat16 and, when `with_burn`, burn's graph; when
 /// `with_train`, also up to 2 forward and backward passes on burn's autodiff device (engine
-/// "burn-train-step", images per second of training without the optimiser step).
+/// "burn-train-step", images per second of training without the optimiser step) and
+/// `repeats` on the plain engine's training passes ("plain-train-step").
 pub fn bench_inference(
     kind: NetKind,
     rows: usize,
@@ -137,6 +139,23 @@ pub fn bench_inference(
             Ok(std::hint::black_box(loss.backward()))
         })?;
         out.push(record("burn-train-step", ips));
+        // The same on the plain engine (`train --engine plain`): the weights copied out of
+        // burn, forward with batch statistics, backward, gradients handed back by id.
+        let plain_dev = ocm_learn::cpu();
+        let (ips, _) = timed(repeats, batch, || {
+            let pass = super::backprop::TrainPass::new(&net)?;
+            pass.step(&x, batch, rows, cols, &plain_dev, |out| {
+                let n = out.len() as f64;
+                let loss = out.iter().map(|&v| f64::from(v).powi(2)).sum::<f64>() / n;
+                Ok((
+                    loss,
+                    out.iter()
+                        .map(|&v| (2.0 * f64::from(v) / n) as f32)
+                        .collect(),
+                ))
+            })
+        })?;
+        out.push(record("plain-train-step", ips));
     }
     Ok(out)
 }

@@ -54,11 +54,11 @@ fn on_pool(par: Par) -> bool {
 /// A feature map of one image, channel-last, with a one-pixel zero border and two spare pixels
 /// at the end (the last row of the shifted views reads two pixels past the border).
 #[derive(Debug, Clone)]
-struct Map {
-    h: usize,
-    w: usize,
-    c: usize,
-    data: Vec<f32>,
+pub(super) struct Map {
+    pub(super) h: usize,
+    pub(super) w: usize,
+    pub(super) c: usize,
+    pub(super) data: Vec<f32>,
 }
 
 /// Buffers of dropped maps and products on one thread, reused: a full-size image allocates
@@ -101,12 +101,12 @@ thread_local! {
 }
 
 /// A pooled buffer of `n` values, contents unspecified.
-fn take(n: usize) -> Vec<f32> {
+pub(super) fn take(n: usize) -> Vec<f32> {
     POOL.with(|p| p.take(n))
 }
 
 /// Returns a buffer to the pool.
-fn give(v: Vec<f32>) {
+pub(super) fn give(v: Vec<f32>) {
     POOL.with(|p| p.give(v));
 }
 
@@ -148,7 +148,7 @@ impl Drop for Map {
 impl Map {
     /// A map whose interior is to be written by the caller, who then zeroes the border
     /// ([`Map::zero_border`]).
-    fn uninit(h: usize, w: usize, c: usize) -> Self {
+    pub(super) fn uninit(h: usize, w: usize, c: usize) -> Self {
         Map {
             h,
             w,
@@ -158,7 +158,7 @@ impl Map {
     }
 
     /// Zeroes the border pixels and the two spare ones.
-    fn zero_border(&mut self) {
+    pub(super) fn zero_border(&mut self) {
         let (pw, c) = (self.w + 2, self.c);
         self.data[..pw * c].fill(0.0);
         for r in 1..=self.h {
@@ -169,12 +169,12 @@ impl Map {
     }
 
     /// Offset of interior pixel (r, col).
-    fn at(&self, r: usize, col: usize) -> usize {
+    pub(super) fn at(&self, r: usize, col: usize) -> usize {
         ((r + 1) * (self.w + 2) + col + 1) * self.c
     }
 
     /// From one `[c, h, w]` image.
-    fn from_chw(x: &[f32], c: usize, h: usize, w: usize, par: Par) -> Self {
+    pub(super) fn from_chw(x: &[f32], c: usize, h: usize, w: usize, par: Par) -> Self {
         let mut m = Map::uninit(h, w, c);
         m.zero_border();
         m.for_rows(par, |r, row| {
@@ -190,7 +190,7 @@ impl Map {
     /// Calls `f(r, values)` on the `w c` values of every interior row r, the rows in parallel
     /// on the current pool when `par` is a pool (one image's layers, whose products already
     /// run there; the passes between them were a third of a single image's time).
-    fn for_rows(&mut self, par: Par, f: impl Fn(usize, &mut [f32]) + Sync + Send) {
+    pub(super) fn for_rows(&mut self, par: Par, f: impl Fn(usize, &mut [f32]) + Sync + Send) {
         self.map_rows(par, f);
     }
 
@@ -250,11 +250,11 @@ struct Block {
 /// A 2 x 2 stride-2 transposed convolution: `[c_in, 4 c_out]` row-major, columns over
 /// (ky, kx, output channel).
 #[derive(Debug, Clone)]
-struct Up {
-    c_in: usize,
-    c_out: usize,
-    weight: Vec<f32>,
-    bias: Vec<f32>,
+pub(super) struct Up {
+    pub(super) c_in: usize,
+    pub(super) c_out: usize,
+    pub(super) weight: Vec<f32>,
+    pub(super) bias: Vec<f32>,
     /// The weight packed for the bfloat16 kernel ([`Precision::Bf16`]).
     packed: Option<bf16::Packed>,
 }
@@ -273,13 +273,13 @@ pub struct PlainUNet {
     precision: Precision,
 }
 
-fn bias_of(conv: &Conv2d, c_out: usize) -> Vec<f32> {
+pub(super) fn bias_of(conv: &Conv2d, c_out: usize) -> Vec<f32> {
     conv.bias
         .as_ref()
         .map_or_else(|| vec![0.0; c_out], |b| values(b.val()))
 }
 
-fn check_conv(conv: &Conv2d, what: &str, kernel: usize) -> Result<[usize; 4]> {
+pub(super) fn check_conv(conv: &Conv2d, what: &str, kernel: usize) -> Result<[usize; 4]> {
     let d = conv.weight.dims();
     let pad = if kernel == 3 {
         PaddingConfig2d::Explicit(1, 1, 1, 1)
@@ -403,33 +403,15 @@ impl Block {
             }
             bf16::product(&terms, m, dst, on_pool(par));
         } else {
-            let mut accum = Accum::Replace;
-            for (part, x) in self.parts.iter().zip(inputs) {
-                let c = part.c_in;
-                debug_assert_eq!(x.c, c);
-                for (dy, tap) in part.taps.iter().enumerate() {
-                    // Row q of this view is the 3 x c values of the pixels (r + dy, col .. col
-                    // + 3) of the padded input, consecutive rows overlapping by 2 c. faer
-                    // checks that the last element, (m - 1) c + 3 c - 1 past the start, lies
-                    // in the slice (the map keeps 2 spare pixels for dy = 2).
-                    let a = MatRef::from_row_major_slice_with_stride(
-                        &x.data[dy * pw * c..],
-                        m,
-                        3 * c,
-                        c,
-                    );
-                    let b = MatRef::from_row_major_slice(tap, 3 * c, c_out);
-                    matmul(
-                        MatMut::from_row_major_slice_mut(dst, m, c_out),
-                        accum,
-                        a,
-                        b,
-                        1.0f32,
-                        par,
-                    );
-                    accum = Accum::Add;
-                }
-            }
+            conv3_f32(
+                dst,
+                self.parts
+                    .iter()
+                    .zip(inputs)
+                    .map(|(part, x)| (*x, &part.taps)),
+                c_out,
+                par,
+            );
         }
         out.zero_border();
         let bias = &self.bias;
@@ -454,6 +436,40 @@ impl Block {
             }
         }
         out
+    }
+}
+
+/// The f32 3 x 3 convolution of maps of one size, summed over `inputs` (each with its taps, one
+/// `[3 c_in, c_out]` row-major matrix per kernel row, rows over (dx, input channel)), written
+/// into `dst`: `h (w + 2)` product rows of `c_out` values, row q = r (w + 2) + col being the
+/// output pixel (r, col) (columns w and w + 1 of each row are junk the caller puts on a border).
+pub(super) fn conv3_f32<'a>(
+    dst: &mut [f32],
+    inputs: impl Iterator<Item = (&'a Map, &'a [Vec<f32>; 3])>,
+    c_out: usize,
+    par: Par,
+) {
+    let mut accum = Accum::Replace;
+    for (x, taps) in inputs {
+        let (c, pw) = (x.c, x.w + 2);
+        let m = x.h * pw;
+        for (dy, tap) in taps.iter().enumerate() {
+            // Row q of this view is the 3 x c values of the pixels (r + dy, col .. col + 3) of
+            // the padded input, consecutive rows overlapping by 2 c. faer checks that the last
+            // element, (m - 1) c + 3 c - 1 past the start, lies in the slice (the map keeps 2
+            // spare pixels for dy = 2).
+            let a = MatRef::from_row_major_slice_with_stride(&x.data[dy * pw * c..], m, 3 * c, c);
+            let b = MatRef::from_row_major_slice(tap, 3 * c, c_out);
+            matmul(
+                MatMut::from_row_major_slice_mut(&mut dst[..m * c_out], m, c_out),
+                accum,
+                a,
+                b,
+                1.0f32,
+                par,
+            );
+            accum = Accum::Add;
+        }
     }
 }
 
@@ -527,7 +543,7 @@ fn group_norm(
 /// |f| <= ln 2 / 2, e^f by its Taylor polynomial to degree 7 (relative error below 2e-8), and
 /// 2^k through the exponent bits; below -87 it is 0.
 #[inline(always)]
-fn exp_neg(y_in: f32) -> f32 {
+pub(super) fn exp_neg(y_in: f32) -> f32 {
     const ROUND: f32 = 12_582_912.0; // 1.5 * 2^23: adding and subtracting it rounds to integer
     let y = y_in.max(-87.0);
     let k = (y * std::f32::consts::LOG2_E + ROUND) - ROUND;
@@ -550,7 +566,7 @@ fn exp_neg(y_in: f32) -> f32 {
 /// burn backend calls libm's erf per value, which dominated the rendering network's time). The
 /// loop is compiled for the widest vector instructions the CPU has, chosen at run time (the
 /// crate itself is built for baseline x86-64, whose SSE2 holds 4 values per instruction).
-fn gelu(v: &mut [f32]) {
+pub(super) fn gelu(v: &mut [f32]) {
     /// pulp's dispatch inlines `with_simd` into a function compiled with the detected target
     /// features (a closure's body would not be).
     struct Gelu<'a>(&'a mut [f32]);
@@ -586,7 +602,7 @@ fn gelu_inline(v: &mut [f32]) {
     }
 }
 
-fn max_pool(x: &Map, par: Par) -> Map {
+pub(super) fn max_pool(x: &Map, par: Par) -> Map {
     let (h, w, c) = (x.h / 2, x.w / 2, x.c);
     let mut out = Map::uninit(h, w, c);
     out.zero_border();
@@ -605,7 +621,7 @@ fn max_pool(x: &Map, par: Par) -> Map {
 }
 
 impl Up {
-    fn new(u: &ConvTranspose2d) -> Result<Self> {
+    pub(super) fn new(u: &ConvTranspose2d) -> Result<Self> {
         let d = u.weight.dims();
         if d[2] != 2
             || d[3] != 2
@@ -644,7 +660,7 @@ impl Up {
         })
     }
 
-    fn forward(&self, x: &Map, par: Par) -> Map {
+    pub(super) fn forward(&self, x: &Map, par: Par) -> Map {
         let (h, w, pw) = (x.h, x.w, x.w + 2);
         let (ci, co) = (self.c_in, self.c_out);
         // Every pixel of the interior rows (borders included, they are zero) times the weights.
@@ -691,6 +707,74 @@ impl Up {
     }
 }
 
+/// The 1 x 1 head's weights as `[c, output]` row-major, and `output`.
+pub(super) fn head_weights(head: &Conv2d) -> Result<(Vec<f32>, usize)> {
+    let [output, c_head, _, _] = check_conv(head, "U-Net head", 1)?;
+    let hw = values(head.weight.val());
+    let mut w = vec![0.0f32; c_head * output];
+    for o in 0..output {
+        for ch in 0..c_head {
+            w[ch * output + o] = hw[o * c_head + ch];
+        }
+    }
+    Ok((w, output))
+}
+
+/// The 1 x 1 head (`weight` `[c, output]` row-major) on a map, as a `[output, h, w]` image.
+pub(super) fn head_forward(x: &Map, weight: &[f32], bias: &[f32], par: Par) -> Vec<f32> {
+    let (h, w, c, output) = (x.h, x.w, x.c, bias.len());
+    // Over the interior rows (border pixels included, then dropped).
+    let pw = w + 2;
+    let m = h * pw;
+    let mut acc = take(m * output);
+    matmul(
+        MatMut::from_row_major_slice_mut(&mut acc, m, output),
+        Accum::Replace,
+        MatRef::from_row_major_slice(&x.data[pw * c..(pw + m) * c], m, c),
+        MatRef::from_row_major_slice(weight, c, output),
+        1.0f32,
+        par,
+    );
+    let mut out = vec![0.0f32; output * h * w];
+    for r in 0..h {
+        for col in 0..w {
+            let src = &acc[(r * pw + col + 1) * output..][..output];
+            for (o, (s, b)) in src.iter().zip(bias).enumerate() {
+                out[(o * h + r) * w + col] = s + b;
+            }
+        }
+    }
+    give(acc);
+    out
+}
+
+/// Checks `values` values as a `[batch, input, h, w]` input of a U-Net of `levels` levels and
+/// returns the values per image.
+pub(super) fn check_batch(
+    input: usize,
+    levels: usize,
+    values: usize,
+    batch: usize,
+    h: usize,
+    w: usize,
+) -> Result<usize> {
+    let div = 1usize << (levels.max(1) - 1);
+    let per = input * h * w;
+    if batch == 0
+        || h == 0
+        || w == 0
+        || !h.is_multiple_of(div)
+        || !w.is_multiple_of(div)
+        || values != batch * per
+    {
+        return Err(TactileError::Input(format!(
+            "a U-Net input must be {input} channels with height and width divisible by {div}; got \
+             {values} values for {batch} x {input} x {h} x {w}"
+        )));
+    }
+    Ok(per)
+}
+
 impl PlainUNet {
     /// Copies the weights of `net` (evaluation: batch normalisation with running statistics).
     pub fn new(net: &UNet) -> Result<Self> {
@@ -716,14 +800,7 @@ impl PlainUNet {
             merge.push(Block::new(m, &[u.c_out, skip])?);
             up.push(u);
         }
-        let [output, c_head, _, _] = check_conv(&net.head, "U-Net head", 1)?;
-        let hw = values(net.head.weight.val());
-        let mut head = vec![0.0f32; c_head * output];
-        for o in 0..output {
-            for ch in 0..c_head {
-                head[ch * output + o] = hw[o * c_head + ch];
-            }
-        }
+        let (head, output) = head_weights(&net.head)?;
         Ok(PlainUNet {
             input,
             output,
@@ -783,52 +860,14 @@ impl PlainUNet {
             let up = u.forward(&x, par);
             x = m.forward(&[&up, &skip], par);
         }
-        // 1 x 1 head over the interior rows (border pixels included, then dropped).
-        let (pw, c) = (w + 2, x.c);
-        let m = h * pw;
-        let mut acc = take(m * self.output);
-        matmul(
-            MatMut::from_row_major_slice_mut(&mut acc, m, self.output),
-            Accum::Replace,
-            MatRef::from_row_major_slice(&x.data[pw * c..(pw + m) * c], m, c),
-            MatRef::from_row_major_slice(&self.head, c, self.output),
-            1.0f32,
-            par,
-        );
-        let mut out = vec![0.0f32; self.output * h * w];
-        for r in 0..h {
-            for col in 0..w {
-                let src = &acc[(r * pw + col + 1) * self.output..][..self.output];
-                for (o, (s, b)) in src.iter().zip(&self.head_bias).enumerate() {
-                    out[(o * h + r) * w + col] = s + b;
-                }
-            }
-        }
-        give(acc);
-        out
+        head_forward(&x, &self.head, &self.head_bias, par)
     }
 
     /// `[batch, input, h, w]` (row-major) to `[batch, output, h, w]`; h and w must divide by
     /// 2^(levels - 1). Images run in parallel on the current rayon pool; a single image uses
     /// the pool inside its matrix products instead.
     pub fn forward(&self, x: &[f32], batch: usize, h: usize, w: usize) -> Result<Vec<f32>> {
-        let div = 1usize << (self.down.len() - 1);
-        let per = self.input * h * w;
-        if batch == 0
-            || h == 0
-            || w == 0
-            || !h.is_multiple_of(div)
-            || !w.is_multiple_of(div)
-            || x.len() != batch * per
-        {
-            return Err(TactileError::Input(format!(
-                "a U-Net input must be {} channels with height and width divisible by {div}; got \
-                 {} values for {batch} x {} x {h} x {w}",
-                self.input,
-                x.len(),
-                self.input
-            )));
-        }
+        let per = check_batch(self.input, self.down.len(), x.len(), batch, h, w)?;
         if batch == 1 || rayon::current_num_threads() == 1 {
             let par = if batch == 1 { Par::rayon(0) } else { Par::Seq };
             return Ok(x

@@ -3,11 +3,13 @@
 //! `ocm-learn`, trained on pairs from the tactile FEM and the physically based renderer
 //! ([`pairs`]).
 
+pub mod backprop;
 pub mod bench;
 pub mod bf16;
 pub mod force;
 pub mod infer;
 pub mod pairs;
+pub mod plain_loss;
 pub mod real_frames;
 
 use crate::mask::{Grid, Mask, mask_from_fn};
@@ -505,14 +507,53 @@ impl NetData {
     }
 }
 
-/// Trains `net` (built on an autodiff device) on `split`; with `shuffle_targets` each training
-/// input is paired with another sample's target (a control that must not learn).
+/// Which engine computes the training gradients.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Engine {
+    /// burn's autodiff graph of [`NetData::loss`].
+    #[default]
+    Burn,
+    /// The plain engine's hand-written passes ([`backprop`]) and [`NetData::loss_and_grad`];
+    /// the validation loss through [`infer::PlainUNet`].
+    Plain,
+}
+
+impl std::str::FromStr for Engine {
+    type Err = TactileError;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "burn" => Ok(Engine::Burn),
+            "plain" => Ok(Engine::Plain),
+            other => Err(TactileError::Input(format!(
+                "training engine must be burn or plain, got {other:?}"
+            ))),
+        }
+    }
+}
+
+/// Trains `net` (built on an autodiff device) on `split` with burn's autodiff; with
+/// `shuffle_targets` each training input is paired with another sample's target (a control
+/// that must not learn).
 pub fn train(
     data: &NetData,
     net: UNet,
     split: &Split,
     cfg: &TrainConfig,
     shuffle_targets: Option<u64>,
+) -> Result<TrainReport<UNet>> {
+    train_with(data, net, split, cfg, shuffle_targets, Engine::Burn)
+}
+
+/// [`train`] with the gradients from `engine`. Both engines share burn's Adam, clipping,
+/// split, shuffling, early stopping and checkpoints.
+pub fn train_with(
+    data: &NetData,
+    net: UNet,
+    split: &Split,
+    cfg: &TrainConfig,
+    shuffle_targets: Option<u64>,
+    engine: Engine,
 ) -> Result<TrainReport<UNet>> {
     let mut target_of: Vec<usize> = (0..data.len()).collect();
     if let Some(seed) = shuffle_targets {
@@ -524,10 +565,49 @@ pub fn train(
             target_of[*a] = b;
         }
     }
-    Ok(ocm_learn::train_split(net, split, cfg, |m, idx, dev| {
-        let t: Vec<usize> = idx.iter().map(|&i| target_of[i]).collect();
-        data.loss(m, idx, &t, dev)
-    })?)
+    let targets = |idx: &[usize]| -> Vec<usize> { idx.iter().map(|&i| target_of[i]).collect() };
+    match engine {
+        Engine::Burn => Ok(ocm_learn::train_split(net, split, cfg, |m, idx, dev| {
+            data.loss(m, idx, &targets(idx), dev)
+        })?),
+        Engine::Plain => {
+            let learn = |e: TactileError| ocm_learn::LearnError::Data(e.to_string());
+            let device = ocm_learn::cpu();
+            let (rows, cols) = (data.rows, data.cols);
+            Ok(ocm_learn::train_split_steps(
+                net,
+                split,
+                cfg,
+                |m, idx| {
+                    let t = targets(idx);
+                    backprop::TrainPass::new(m)
+                        .and_then(|pass| {
+                            pass.step(
+                                &data.input_values(idx),
+                                idx.len(),
+                                rows,
+                                cols,
+                                &device,
+                                |out| data.loss_and_grad(out, idx, &t),
+                            )
+                        })
+                        .map_err(learn)
+                },
+                |m, samples| {
+                    let plain = infer::PlainUNet::new(m).map_err(learn)?;
+                    let mut sum = 0.0;
+                    for b in samples.chunks(cfg.batch_size.max(1)) {
+                        let out = plain
+                            .forward(&data.input_values(b), b.len(), rows, cols)
+                            .map_err(learn)?;
+                        let (l, _) = data.loss_and_grad(&out, b, b).map_err(learn)?;
+                        sum += l * b.len() as f64;
+                    }
+                    Ok(sum / samples.len().max(1) as f64)
+                },
+            )?)
+        }
+    }
 }
 
 /// Least elongation ([`elongation`]) of the true contact mask for its principal axis to count
