@@ -125,7 +125,7 @@ pub struct TrainNetArgs {
     #[arg(long, default_value = "f32")]
     pub precision: nets::infer::Precision,
     /// What computes the training gradients: `plain`, the plain engine's hand-written
-    /// forward and backward passes (5-8 times faster on a CPU, the same gradients to
+    /// forward and backward passes (about 10 times faster on a CPU, the same gradients to
     /// round-off), or `burn`, burn's autodiff graph (how the checkpoints before it were
     /// trained). Both use burn's Adam and checkpoints.
     #[arg(long, default_value = "plain")]
