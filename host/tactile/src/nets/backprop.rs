@@ -634,11 +634,43 @@ fn max_pool_grad(x: &Map, pooled: &Map, d: &Map) -> Map {
     out
 }
 
+/// Gradients of a per-pixel product of `x` with `weight` (`[c, n]` row-major; the head, a
+/// transposed convolution) from the output gradient rows `g` (`[h (w + 2), n]`, the forward
+/// product's rows, zero on the border columns): the input gradient as a map and the weight
+/// gradient `[c, n]`.
+fn pointwise_grads(x: &Map, g: &[f32], weight: &[f32], par: Par) -> (Map, Vec<f32>) {
+    let (h, w, c, pw) = (x.h, x.w, x.c, x.w + 2);
+    let m = h * pw;
+    let n = weight.len() / c;
+    let gm = MatRef::from_row_major_slice(g, m, n);
+    let mut dx = Map::uninit(h, w, c);
+    dx.data.fill(0.0);
+    matmul(
+        MatMut::from_row_major_slice_mut(&mut dx.data[pw * c..(pw + m) * c], m, c),
+        Accum::Replace,
+        gm,
+        MatRef::from_row_major_slice(weight, c, n).transpose(),
+        1.0f32,
+        par,
+    );
+    dx.zero_border();
+    let mut dw = vec![0.0f32; c * n];
+    matmul(
+        MatMut::from_row_major_slice_mut(&mut dw, c, n),
+        Accum::Replace,
+        MatRef::from_row_major_slice(&x.data[pw * c..(pw + m) * c], m, c).transpose(),
+        gm,
+        1.0f32,
+        par,
+    );
+    (dx, dw)
+}
+
 /// Gradients of a 2 x 2 stride-2 transposed convolution from its output gradient `d`: the
-/// input gradient (when asked), the weight `[c_in, 4 c_out]` and the bias.
+/// input gradient, the weight `[c_in, 4 c_out]` and the bias.
 fn up_backward(u: &Up, x: &Map, d: &Map, par: Par) -> (Map, Vec<f32>, Vec<f64>) {
     let (h, w, pw) = (x.h, x.w, x.w + 2);
-    let (ci, co) = (u.c_in, u.c_out);
+    let co = u.c_out;
     let m = h * pw;
     // G: the output gradient gathered per input pixel (rows as in the forward product).
     let mut g = vec![0.0f32; m * 4 * co];
@@ -651,29 +683,7 @@ fn up_backward(u: &Up, x: &Map, d: &Map, par: Par) -> (Map, Vec<f32>, Vec<f64>) 
             }
         }
     }
-    let gm = MatRef::from_row_major_slice(&g, m, 4 * co);
-    let xm = MatRef::from_row_major_slice(&x.data[pw * ci..(pw + m) * ci], m, ci);
-    let wm = MatRef::from_row_major_slice(&u.weight, ci, 4 * co);
-    let mut dx = Map::uninit(h, w, ci);
-    dx.data.fill(0.0);
-    matmul(
-        MatMut::from_row_major_slice_mut(&mut dx.data[pw * ci..(pw + m) * ci], m, ci),
-        Accum::Replace,
-        gm,
-        wm.transpose(),
-        1.0f32,
-        par,
-    );
-    dx.zero_border();
-    let mut dw = vec![0.0f32; ci * 4 * co];
-    matmul(
-        MatMut::from_row_major_slice_mut(&mut dw, ci, 4 * co),
-        Accum::Replace,
-        xm.transpose(),
-        gm,
-        1.0f32,
-        par,
-    );
+    let (dx, dw) = pointwise_grads(x, &g, &u.weight, par);
     (dx, dw, channel_sums(d))
 }
 
@@ -828,29 +838,7 @@ impl<'a> TrainPass<'a> {
                         }
                     }
                 }
-                let x = img.top();
-                let gm = MatRef::from_row_major_slice(&g, m, o);
-                let mut dw = vec![0.0f32; c0 * o];
-                matmul(
-                    MatMut::from_row_major_slice_mut(&mut dw, c0, o),
-                    Accum::Replace,
-                    MatRef::from_row_major_slice(&x.data[pw * c0..(pw + m) * c0], m, c0)
-                        .transpose(),
-                    gm,
-                    1.0f32,
-                    Par::Seq,
-                );
-                let mut dx = Map::uninit(h, w, c0);
-                dx.data.fill(0.0);
-                matmul(
-                    MatMut::from_row_major_slice_mut(&mut dx.data[pw * c0..(pw + m) * c0], m, c0),
-                    Accum::Replace,
-                    gm,
-                    MatRef::from_row_major_slice(&self.head, c0, o).transpose(),
-                    1.0f32,
-                    Par::Seq,
-                );
-                dx.zero_border();
+                let (dx, dw) = pointwise_grads(img.top(), &g, &self.head, Par::Seq);
                 let db: Vec<f64> = (0..o)
                     .map(|ch| {
                         src[ch * h * w..(ch + 1) * h * w]
