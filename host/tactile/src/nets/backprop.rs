@@ -20,8 +20,8 @@ use ocm_learn::{UNet, values};
 use rayon::prelude::*;
 
 use super::infer::{
-    Map, Up, bias_of, check_batch, check_conv, conv3_f32, exp_neg, gelu, head_forward,
-    head_weights, max_pool,
+    Map, Up, bias_of, check_batch, check_conv, conv3_f32, gelu, head_forward, head_weights,
+    max_pool, normal_cdf2_and_gauss,
 };
 use crate::{Result, TactileError};
 
@@ -362,21 +362,9 @@ fn split(x: &Map, ca: usize) -> (Map, Map) {
 
 /// The derivative of the exact GELU, Phi(z) + z phi(z), with [`gelu`]'s erf approximation.
 fn gelu_slope(z: f32) -> f32 {
-    const P: f32 = 0.327_591_1;
-    const A: [f32; 5] = [
-        0.254_829_6,
-        -0.284_496_74,
-        1.421_413_7,
-        -1.453_152_1,
-        1.061_405_4,
-    ];
-    let u = z.abs() * std::f32::consts::FRAC_1_SQRT_2;
-    let t = 1.0 / (1.0 + P * u);
-    let e = exp_neg(-u * u);
-    let tail = t * (A[0] + t * (A[1] + t * (A[2] + t * (A[3] + t * A[4])))) * e;
-    let cdf = 0.5 * if z < 0.0 { tail } else { 2.0 - tail };
-    // phi(z) = e^(-z^2 / 2) / sqrt(2 pi), and e = e^(-z^2 / 2).
-    cdf + z * e * 0.398_942_3
+    let (cdf2, gauss) = normal_cdf2_and_gauss(z);
+    // phi(z) = e^(-z^2 / 2) / sqrt(2 pi).
+    0.5 * cdf2 + z * gauss * 0.398_942_3
 }
 
 impl Block {
@@ -1223,7 +1211,7 @@ mod tests {
     }
 
     #[test]
-    fn one_image_on_the_pool_matches_the_batch_order() {
+    fn one_image_on_the_pool_matches_burns_autodiff() {
         check(NetKind::Perception, 8, 8, 1);
     }
 }
