@@ -603,6 +603,12 @@ impl Plant {
         }
     }
 
+    /// Elongations of the three columns from their rest length in state `s`, metres.
+    pub fn column_elongations_m(&self, s: &PlantState) -> [f64; 3] {
+        let rest = self.column_rest_length_m();
+        s.q.column_lengths(self.d).map(|l| l - rest)
+    }
+
     /// Hysteresis force amplitude `F_h` (half the loop width), newtons.
     fn hysteresis_amplitude_n(&self) -> f64 {
         let e = &self.params.effects;

@@ -47,6 +47,13 @@ pub struct LogRow {
     pub hall3: i16,
     /// Tip force along z, N.
     pub load_z_n: f64,
+    /// Elongation of column 1 from its rest length, mm (a state of the plant: the tip is a
+    /// function of the three).
+    pub e1_mm: f64,
+    /// Elongation of column 2 from its rest length, mm.
+    pub e2_mm: f64,
+    /// Elongation of column 3 from its rest length, mm.
+    pub e3_mm: f64,
 }
 
 /// Result of one controller on one scenario.

@@ -147,6 +147,7 @@ pub(super) fn simulate(
             q_errs.push(q_err);
         }
         if logged {
+            let e = plant.column_elongations_m(&state);
             log.push(LogRow {
                 t_s: tn,
                 ref_x_mm: rf[0] * 1e3,
@@ -167,6 +168,9 @@ pub(super) fn simulate(
                 hall2: sample.hall_codes[1],
                 hall3: sample.hall_codes[2],
                 load_z_n: state.load.force_n[2],
+                e1_mm: e[0] * 1e3,
+                e2_mm: e[1] * 1e3,
+                e3_mm: e[2] * 1e3,
             });
         }
     }

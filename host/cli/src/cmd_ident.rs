@@ -124,8 +124,9 @@ pub struct IdentArgs {
     /// segment with z from base to tip (rotate a hanging mount's log first), load_n axial
     /// tension; series u_<name> inputs, y_<name> measured outputs, and optionally sim_<name>
     /// (another simulator's prediction of y_<name>: then ident explains measured minus
-    /// simulated) and x_<name> (its states, e.g. a position whose velocity friction follows).
-    /// Units come from the name's suffix (_n, _nm, _m, _mm, _kpa, _pa, _bar, _rad, _deg, _s,
+    /// simulated) and x_<name> (its states, e.g. a position whose velocity friction follows;
+    /// where the states determine the simulated output, memory, offsets and gains act on them
+    /// too, a gain about the state's zero: log elongations rather than lengths). Units come from the name's suffix (_n, _nm, _m, _mm, _kpa, _pa, _bar, _rad, _deg, _s,
     /// _v). A record that contradicts the conventions gets a warning in the report.
     #[arg(required = true)]
     pub file: Option<PathBuf>,

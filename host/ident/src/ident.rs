@@ -125,7 +125,7 @@ pub fn conventions(kind: Kind) -> &'static str {
             "pose: tip x_mm, y_mm, z_mm in the base frame of a standing segment, z along the unbent backbone pointing from base to tip (z > 0); load_n is axial tension on the segment; p1..p3_kpa gauge pressures of chambers at 90, 210 and 330 degrees from x (inflation positive). A hanging mount must be rotated into this frame first"
         }
         Kind::Series => {
-            "series: u_<name> inputs, y_<name> measured outputs, optional sim_<name> (a simulator's prediction of y_<name>) and x_<name> (its states); values in the file's units, named by the suffix (_n, _m, _mm, _kpa, _pa, _rad, _s); a time that goes backwards starts a new trial"
+            "series: u_<name> inputs, y_<name> measured outputs, optional sim_<name> (a simulator's prediction of y_<name>) and x_<name> (its states; where they determine the simulated output, memory, offsets and gains also act on them, a gain about the state's zero, so log states whose zero is the unloaded configuration, e.g. an elongation rather than a length); values in the file's units, named by the suffix (_n, _m, _mm, _kpa, _pa, _rad, _s); a time that goes backwards starts a new trial"
         }
     }
 }
@@ -263,16 +263,9 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         diagnostics.extend(d);
         hotspots.extend(h);
     }
-    // Noise from the baseline residual's high-frequency content, per channel, pooled like the
-    // RMSE; a model error that is smooth at the sampling rate does not enter it.
-    let noise_rmse = {
-        let ms: f64 = residual_before
-            .iter()
-            .map(|r: &Vec<f64>| signal::noise_sd(r, &rec.segment_starts, &train).powi(2))
-            .sum::<f64>()
-            / residual_before.len().max(1) as f64;
-        ms.sqrt()
-    };
+    // Noise from the baseline residual's high-frequency content; a model error that is smooth
+    // at the sampling rate does not enter it.
+    let noise_rmse = prep.noise_rmse();
     let ratio = |rmse: f64| {
         if noise_rmse > 0.0 {
             rmse / noise_rmse

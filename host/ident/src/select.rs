@@ -22,6 +22,13 @@
 //! loses held-out accuracy. Last, every named
 //! cause must still pass the addition tests against the others, or the weakest is dropped.
 //! No passing candidate means `none`.
+//!
+//! A noise-free record (estimated noise below `noise_free_ratio` of the baseline's held-out
+//! RMSE: a simulator's or a virtual lab's log) makes every difference between fits
+//! significant, so there relevance decides: the first cause is the one with the fewest
+//! parameters among the passing candidates within `relevance_pct` of the baseline's RMSE of
+//! the best held-out RMSE, and each further cause must remove `relevance_pct` of the
+//! baseline's RMSE.
 
 use serde::Serialize;
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
@@ -48,6 +55,14 @@ pub struct Config {
     pub min_extra_gain_pct: f64,
     /// Bandwidth (lags) of the Newey-West variance in the held-out t-test.
     pub hac_lags: usize,
+    /// On a noise-free record (see `noise_free_ratio`): the smallest share, percent, of the
+    /// baseline's held-out RMSE that each further cause must remove. There every difference
+    /// between two fits is significant, so significance cannot tell a second cause from what
+    /// the first cause's extension, inexact in form, leaves over; relevance decides.
+    pub relevance_pct: f64,
+    /// A record counts as noise-free when its estimated noise RMS is below this fraction of
+    /// the baseline's held-out RMSE (logs of a simulator or a virtual lab, exact positions).
+    pub noise_free_ratio: f64,
     /// Baseline of `series` records without `sim_` columns.
     pub series_model: SeriesModel,
     /// Also fit the linear state-space model beside a static `series` baseline and report its
@@ -67,6 +82,8 @@ impl Default for Config {
             max_causes: 3,
             min_extra_gain_pct: 15.0,
             hac_lags: 20,
+            relevance_pct: 5.0,
+            noise_free_ratio: 1e-3,
             series_model: SeriesModel::Static,
             dynamic_reference: true,
             ocm: ParamPreset::Table31,
@@ -291,6 +308,32 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
             .min_by(|a, b| a.1.rmse.total_cmp(&b.1.rmse))
             .unwrap_or((bi, b))
     });
+    // On a noise-free record the training criterion measures only how inexact each
+    // extension's form is (every difference is "significant"): candidates whose held-out RMSE
+    // lies within `relevance_pct` of the baseline's from the best are not told apart, and the
+    // one with the fewest parameters among them is named (then the lower held-out RMSE).
+    let base_rmse = heldout_rmse(prep, &base.pred);
+    let noise_free = prep.noise_rmse() < cfg.noise_free_ratio * base_rmse;
+    let window = cfg.relevance_pct / 100.0 * base_rmse;
+    let best = if noise_free {
+        let r_min = candidates
+            .iter()
+            .filter(|c| c.accepted)
+            .map(|c| c.rmse)
+            .fold(f64::INFINITY, f64::min);
+        candidates
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.accepted && c.rmse <= r_min + window)
+            .min_by(|a, b| {
+                singles[a.0]
+                    .extra_params
+                    .cmp(&singles[b.0].extra_params)
+                    .then(a.1.rmse.total_cmp(&b.1.rmse))
+            })
+    } else {
+        best
+    };
     let direction = direction_tests(prep);
     let Some((mut bi, _)) = best else {
         return Selection {
@@ -316,6 +359,11 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
         bi = fi;
     }
     let pinned = |c: Cause| flips && c == Cause::Friction;
+    // Relevance on noise-free records: a further cause must remove `relevance_pct` of the
+    // baseline's held-out RMSE (from the set without it to the set with it).
+    let relevant = |without: &SetFit, with: &SetFit| {
+        !noise_free || heldout_rmse(prep, &without.pred) - heldout_rmse(prep, &with.pred) >= window
+    };
     let mut current = singles[bi].clone();
     let mut causes = vec![pool[bi]];
     let mut steps = Vec::new();
@@ -339,8 +387,9 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
             let against_flexible = score(prep, &flexible_ref, &flex, cfg, m, c);
             let f = prep.fit_set(&set);
             let mut s = score(prep, &current, &f, cfg, m, c);
-            s.accepted &=
-                against_flexible.accepted && against_flexible.gain_pct >= cfg.min_extra_gain_pct;
+            s.accepted &= against_flexible.accepted
+                && against_flexible.gain_pct >= cfg.min_extra_gain_pct
+                && relevant(&current, &f);
             steps.push(s.clone());
             if s.accepted
                 && s.gain_pct >= cfg.min_extra_gain_pct
@@ -424,7 +473,8 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
             rest.remove(i);
             let f = prep.fit_set(&rest);
             let s = score(prep, &f, &current, cfg, m, causes[i]);
-            let earns = s.accepted && s.gain_pct >= cfg.min_extra_gain_pct;
+            let earns =
+                s.accepted && s.gain_pct >= cfg.min_extra_gain_pct && relevant(&f, &current);
             if !earns {
                 failing.push((s.score, i, f));
             }

@@ -17,6 +17,12 @@ use ocm_shared::params::ParamPreset;
 fn circle(effects: Effects) -> (Vec<LogRow>, f64) {
     let mut cfg = SimConfig::default();
     cfg.plant.effects = effects;
+    if let Some(seed) = std::env::var("OCM_LAB_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+    {
+        cfg.seed = seed;
+    }
     cfg.controllers = vec![ControllerKind::OpenLoop];
     let scenario = std::env::var("OCM_LAB_SCENARIO").unwrap_or_else(|_| "circle".into());
     let report = run_scenario(&scenario, &cfg).expect("the lab runs the scenario");
@@ -44,15 +50,28 @@ fn as_pose(log: &[LogRow], weight_n: f64) -> String {
     csv
 }
 
-/// A simulator record: commands as inputs, `measured`'s tip as `y_`, `simulated`'s as `sim_`.
+/// A simulator record: commands as inputs, `measured`'s tip as `y_`, `simulated`'s as `sim_`,
+/// and the simulated column elongations as the simulator's states `x_`.
 fn as_series(measured: &[LogRow], simulated: &[LogRow]) -> String {
     let mut csv = String::from(
-        "time_s,u_cmd1_pa,u_cmd2_pa,u_cmd3_pa,y_x_mm,y_y_mm,y_z_mm,sim_x_mm,sim_y_mm,sim_z_mm\n",
+        "time_s,u_cmd1_pa,u_cmd2_pa,u_cmd3_pa,y_x_mm,y_y_mm,y_z_mm,sim_x_mm,sim_y_mm,sim_z_mm,x_e1_mm,x_e2_mm,x_e3_mm\n",
     );
     for (m, s) in measured.iter().zip(simulated) {
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{}\n",
-            m.t_s, m.cmd1_pa, m.cmd2_pa, m.cmd3_pa, m.x_mm, m.y_mm, m.z_mm, s.x_mm, s.y_mm, s.z_mm
+            "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            m.t_s,
+            m.cmd1_pa,
+            m.cmd2_pa,
+            m.cmd3_pa,
+            m.x_mm,
+            m.y_mm,
+            m.z_mm,
+            s.x_mm,
+            s.y_mm,
+            s.z_mm,
+            s.e1_mm,
+            s.e2_mm,
+            s.e3_mm
         ));
     }
     csv
@@ -161,13 +180,15 @@ fn lab_circle_as_pose_names_the_plants_hysteresis() {
 }
 
 /// Each effect the lab has, alone at the rig's magnitude (hysteresis at 10 %), with the cause
-/// ident must name when the run with it is the measurement and the clean run the simulator:
-/// memory in the columns is `hysteresis`; the per-column stiffness spread changes how far each
-/// chamber's pressure moves the tip, a gain per input (`gain`); the regulators' offsets add a
-/// constant pressure per chamber, an input offset (`offset`).
-fn lab_effects() -> [(&'static str, Effects, Cause); 3] {
+/// ident must name when the run with it is the measurement and the clean run the simulator,
+/// and whether it must be named alone: memory in the columns is `hysteresis`; the per-column
+/// stiffness spread scales each column's elongation, a gain of the simulator's states
+/// (`gain`); the regulators' offsets add a constant pressure per chamber, an input offset
+/// (`offset`), which is not asserted alone: a gain of the elongations fits it as well or better
+/// on four of five seeds (see the README).
+fn lab_effects() -> [(&'static str, Effects, Cause, bool); 3] {
     [
-        ("hysteresis", hysteresis_10pct(), Cause::Hysteresis),
+        ("hysteresis", hysteresis_10pct(), Cause::Hysteresis, true),
         (
             "stiffness spread",
             Effects {
@@ -175,6 +196,7 @@ fn lab_effects() -> [(&'static str, Effects, Cause); 3] {
                 ..Effects::NONE
             },
             Cause::Gain,
+            true,
         ),
         (
             "regulator offsets",
@@ -183,6 +205,7 @@ fn lab_effects() -> [(&'static str, Effects, Cause); 3] {
                 ..Effects::NONE
             },
             Cause::Offset,
+            false,
         ),
     ]
 }
@@ -202,7 +225,7 @@ fn lab_circle_as_simulator_record() {
     assert_eq!(id.report.causes, [Cause::None], "{}", id.report.verdict);
     // one effect on: the run with it is the measurement, the clean run the simulator
     let mut misses = Vec::new();
-    for (label, effects, cause) in lab_effects() {
+    for (label, effects, cause, alone) in lab_effects() {
         let (measured, _) = circle(effects);
         let rec = data::parse_csv(
             &as_series(&measured, &clean),
@@ -213,24 +236,28 @@ fn lab_circle_as_simulator_record() {
         let id = identify(&rec, &cfg).unwrap();
         let r = &id.report;
         eprintln!(
-            "simulator record, {label}: {:?}, baseline {:.4} mm, extended {:.4} mm, gain {:.1} %\n  singles: {}\n  additions: {}",
+            "simulator record, {label}: {:?}, baseline {:.4} mm, extended {:.4} mm, gain {:.1} %, noise {:.2e} mm\n  singles: {}\n  additions: {}",
             r.causes,
             r.baseline_rmse,
             r.extended_rmse,
             r.gain_pct,
+            r.noise_rmse,
             ocm_ident::select::evidence(&r.candidates),
             ocm_ident::select::evidence(&r.additions)
         );
-        // what holds (see the README): the effect's own extension passes on its own and the
-        // named set explains most of the error; the exact cause is named first only for
-        // some effects (a complete cubic of the commands fits a regulator offset seen through
-        // a curved response better than an input offset does, on records with exact positions)
+        // the effect's own extension passes on its own and the named set explains most of
+        // the error; memory and the stiffness spread are named alone (the clean run's column
+        // elongations are the simulator's states, and on these noise-free logs a further
+        // cause must remove 5 % of the baseline's error)
         let own = r.candidates.iter().find(|c| c.cause == cause);
         if !own.is_some_and(|c| c.accepted && c.gain_pct > 40.0) || r.gain_pct <= 80.0 {
             misses.push(format!("{label}: {}", r.verdict));
         }
         if r.causes != [cause] {
             eprintln!("  not exact: {label} named {:?}", r.causes);
+            if alone {
+                misses.push(format!("{label}: named {:?}: {}", r.causes, r.verdict));
+            }
         }
         assert_finite(r, label);
     }

@@ -135,3 +135,65 @@ fn the_report_plots_the_held_out_window_first() {
     assert!(md.contains("Verdict") && md.contains("Noise RMS"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A simulator whose output is a curved function of its state: input steps and ramps, a state
+/// `s` that follows `1 + u` through a first-order lag (zero when unloaded), `sim = 2 s + 0.3
+/// s^2`; measured = the same function of `s` changed by `effect`, plus noise. The state is
+/// given as `x_s_mm`.
+fn state_record(effect: impl Fn(&[f64]) -> Vec<f64>, seed: u64) -> Record {
+    let base = record(|u, _| vec![0.0; u.len()], seed);
+    let u = &base.inputs[0].values;
+    let mut s = Vec::with_capacity(u.len());
+    let mut v = 1.0 + u[0];
+    for &ui in u {
+        v += 0.2 * (1.0 + ui - v);
+        s.push(v);
+    }
+    let g = |x: f64| 2.0 * x + 0.3 * x * x;
+    let changed = effect(&s);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed + 100);
+    let nd = Normal::new(0.0, 0.01).unwrap();
+    let y: Vec<f64> = changed
+        .iter()
+        .map(|x| g(*x) + nd.sample(&mut rng))
+        .collect();
+    Record {
+        outputs: vec![Channel::new("x_mm", "mm", y)],
+        simulated: vec![Channel::new(
+            "x_mm",
+            "mm",
+            s.iter().map(|x| g(*x)).collect(),
+        )],
+        states: vec![Channel::new("s_mm", "mm", s)],
+        ..base
+    }
+}
+
+#[test]
+fn effects_on_a_simulators_state_are_named_through_its_sensitivity() {
+    // memory in the state: a Bouc-Wen loop on it
+    let rec = state_record(
+        |s| {
+            let z = BoucWen::series(s, 0.1, BoucWenShape::ROUNDED);
+            s.iter().zip(&z).map(|(x, z)| x - 0.3 * z).collect()
+        },
+        3,
+    );
+    let id = identify(&rec, &Config::default()).unwrap();
+    let r = &id.report;
+    assert_eq!(r.causes, [Cause::Hysteresis], "{}", r.verdict);
+    assert!(r.gain_pct > 80.0, "{}", r.verdict);
+    // the state off by a factor (about its zero): a gain, fitted on the state
+    let rec = state_record(|s| s.iter().map(|x| 1.06 * x).collect(), 4);
+    let id = identify(&rec, &Config::default()).unwrap();
+    let r = &id.report;
+    assert_eq!(r.causes, [Cause::Gain], "{}", r.verdict);
+    assert!(r.gain_pct > 80.0, "{}", r.verdict);
+    assert!(
+        r.extension_params
+            .iter()
+            .any(|p| p.name.contains("state s_mm gain") && (p.value - 0.06).abs() < 0.01),
+        "{:?}",
+        r.extension_params
+    );
+}

@@ -148,6 +148,21 @@ impl Prepared<'_> {
                         nonneg.push(true);
                     }
                 }
+                // Memory in the simulator's states (where they determine its output): play
+                // operators on each state, reaching the output through its sensitivity row by
+                // row, in the orientation being fitted.
+                for (st, jx) in rec.states.iter().zip(&ch.state_jac) {
+                    let x = &st.values;
+                    let range = span(x);
+                    for &w in &PLAY_WIDTHS {
+                        let r = w * range;
+                        let p = signal::play(x, &rec.segment_starts, r);
+                        let m = self.memory_sign.get();
+                        cols.push((0..n).map(|i| m * jx[i] * (x[i] - p[i])).collect());
+                        names.push(format!("PI weight state {} r={:.4}", st.name, r));
+                        nonneg.push(true);
+                    }
+                }
                 if self.flexible.get() == Some(Cause::Hysteresis)
                     && let Some(col) = self.preisach_column(c, &cols)
                 {
@@ -246,6 +261,11 @@ impl Prepared<'_> {
                     names.push(format!("{} bias", inp.name));
                     nonneg.push(false);
                 }
+                for (st, jx) in rec.states.iter().zip(&ch.state_jac) {
+                    cols.push(jx.clone());
+                    names.push(format!("state {} bias", st.name));
+                    nonneg.push(false);
+                }
             }
             Cause::Gain => {
                 if matches!(self.baseline, Baseline::Simulator) {
@@ -256,6 +276,14 @@ impl Prepared<'_> {
                 for (k, inp) in rec.inputs.iter().enumerate() {
                     cols.push((0..n).map(|i| inp.values[i] * ch.jac[k][i]).collect());
                     names.push(format!("{} gain - 1", inp.name));
+                    nonneg.push(false);
+                }
+                // A state off by a factor, about the state's zero: states whose zero is the
+                // unloaded configuration (an elongation, not a length) make a gain and an offset
+                // two different shapes.
+                for (st, jx) in rec.states.iter().zip(&ch.state_jac) {
+                    cols.push((0..n).map(|i| st.values[i] * jx[i]).collect());
+                    names.push(format!("state {} gain - 1", st.name));
                     nonneg.push(false);
                 }
             }

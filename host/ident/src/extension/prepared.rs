@@ -29,6 +29,9 @@ pub struct ChannelFit {
     pub jac: Vec<Vec<f64>>,
     /// Sign of the mean sensitivity to each input (+1 when flat).
     pub sign: Vec<f64>,
+    /// On a simulator record whose states (`x_` columns) determine its output: `d sim / d x_j`
+    /// per state, row by row (see [`STATES_DETERMINE_R2`]); empty otherwise.
+    pub state_jac: Vec<Vec<f64>>,
     /// True when the baseline's own fit is ill-conditioned (see [`lsq::LsqFit`]).
     pub ill_conditioned: bool,
 }
@@ -117,6 +120,15 @@ impl<'a> Prepared<'a> {
                     elastic[i] += fe[i];
                 }
             }
+            let simulator = matches!(baseline, Baseline::Simulator);
+            let input_map = simulator
+                .then(|| SimulatorMap::fit(&cols, &rec.simulated[c].values, &means, &ranges))
+                .flatten();
+            let state_jac = if simulator {
+                state_sensitivities(rec, c, &train)
+            } else {
+                Vec::new()
+            };
             // Central differences of the fitted baseline in each input.
             let mut jac = Vec::new();
             let mut sign = Vec::new();
@@ -138,10 +150,12 @@ impl<'a> Prepared<'a> {
                 };
                 let up = eval(h);
                 let dn = eval(-h);
-                let j: Vec<f64> = if matches!(baseline, Baseline::Simulator) {
+                let j: Vec<f64> = if let Some(map) = &input_map {
                     // the simulator's output is given, not a function ident can evaluate:
                     // its sensitivity to each input is read off the simulated rows
-                    simulator_sensitivity(&cols, &rec.simulated[c].values, &means, &ranges, k)
+                    map.derivative(k)
+                } else if matches!(baseline, Baseline::Simulator) {
+                    vec![0.0; n]
                 } else {
                     up.iter()
                         .zip(&dn)
@@ -161,6 +175,7 @@ impl<'a> Prepared<'a> {
                 elastic,
                 jac,
                 sign,
+                state_jac,
                 ill_conditioned: fit.ill_conditioned,
             });
         }
@@ -181,6 +196,22 @@ impl<'a> Prepared<'a> {
             in_loop_cache: std::cell::RefCell::new(Vec::new()),
             memory_sign: std::cell::Cell::new(1.0),
         }
+    }
+
+    /// Measurement noise RMS estimated from the baseline's training residual: robust second
+    /// differences per channel (see [`signal::noise_sd`]), pooled like the RMSE. A model error
+    /// that is smooth at the sampling rate does not enter it.
+    pub fn noise_rmse(&self) -> f64 {
+        let ms: f64 = self
+            .channels
+            .iter()
+            .map(|ch| {
+                let r: Vec<f64> = ch.y.iter().zip(&ch.yhat).map(|(a, b)| a - b).collect();
+                signal::noise_sd(&r, &self.rec.segment_starts, &self.train).powi(2)
+            })
+            .sum::<f64>()
+            / self.channels.len().max(1) as f64;
+        ms.sqrt()
     }
 
     /// The candidate causes for this record: the fixed seven, and friction where the record
@@ -300,70 +331,152 @@ pub fn channel_scale(ch: &ChannelFit, train: &[bool]) -> f64 {
     }
 }
 
-/// The sensitivity of a simulator's output to input `k`, row by row: the derivative of a
-/// complete polynomial in the normalised inputs fitted to the simulated output on every row
-/// (cubic up to 4 inputs, quadratic up to 8, linear beyond). A simulator that responds to its
-/// inputs with a delay or dynamics is read as its best static map; the sensitivity only
-/// orients and scales the extensions that act through the inputs (an input offset, an
-/// input gain, memory in an input), it never enters the baseline.
-fn simulator_sensitivity(
-    inputs: &[&[f64]],
-    sim: &[f64],
-    means: &[f64],
-    ranges: &[f64],
-    k: usize,
-) -> Vec<f64> {
-    let m = inputs.len();
-    let n = sim.len();
-    let degree = match m {
-        0..=4 => 3,
-        5..=8 => 2,
-        _ => 1,
-    };
-    // exponent tuples of every monomial of total degree 1..=degree
-    fn tuples(m: usize, left: usize, prefix: &mut Vec<u32>, out: &mut Vec<Vec<u32>>) {
-        if prefix.len() == m {
-            if prefix.iter().any(|e| *e > 0) {
-                out.push(prefix.clone());
+/// Share of the simulated output's variance on the training rows that a cubic in the
+/// simulator's states must explain for the states to count as determining it. A kinematic map
+/// (a tip from the column lengths) is fitted to 1e-6 or better; a simulator whose output also
+/// depends on what the states do not carry (a force from a pressure, with the displacement as
+/// its state) falls far short, and its states then only feed friction.
+pub const STATES_DETERMINE_R2: f64 = 0.9999;
+
+/// Per state `x_j` of a simulator record, `d sim_c / d x_j` row by row, when the states
+/// determine the simulated output of channel `c` (a cubic in them explains at least
+/// [`STATES_DETERMINE_R2`] of its training variance); empty otherwise. An effect inside the
+/// simulator then acts on its states: memory in a state, a state off by a constant or a
+/// factor, each reaching the output through this sensitivity.
+fn state_sensitivities(rec: &Record, c: usize, train: &[bool]) -> Vec<Vec<f64>> {
+    if rec.states.is_empty() || rec.states.len() > 4 {
+        return Vec::new();
+    }
+    let cols: Vec<&[f64]> = rec.states.iter().map(|s| s.values.as_slice()).collect();
+    let mut means = Vec::new();
+    let mut ranges = Vec::new();
+    for x in &cols {
+        let tr: Vec<f64> = (0..x.len()).filter(|&i| train[i]).map(|i| x[i]).collect();
+        means.push(signal::mean_std(&tr).0);
+        ranges.push(span(&tr));
+    }
+    let sim = &rec.simulated[c].values;
+    match SimulatorMap::fit(&cols, sim, &means, &ranges) {
+        Some(map) if map.r2(sim, train) >= STATES_DETERMINE_R2 => {
+            (0..cols.len()).map(|j| map.derivative(j)).collect()
+        }
+        _ => Vec::new(),
+    }
+}
+
+/// A simulator's output as a complete polynomial in normalised columns (its inputs or its
+/// states), fitted on every row: cubic up to 4 columns, quadratic up to 8, linear beyond. A
+/// simulator that responds to its inputs with a delay or dynamics is read as its best static
+/// map; the map only orients and scales the extensions that act through those columns (an
+/// offset, a gain, memory), it never enters the baseline.
+struct SimulatorMap {
+    /// Exponent tuple of each monomial (total degree 1 to the degree).
+    exps: Vec<Vec<u32>>,
+    /// Coefficients: the constant, then one per monomial.
+    coef: Vec<f64>,
+    /// Normalised columns, `(x - mean) / range`.
+    z: Vec<Vec<f64>>,
+    /// Ranges the columns were normalised by.
+    ranges: Vec<f64>,
+}
+
+impl SimulatorMap {
+    /// Fits the polynomial; `None` when the fit is not finite.
+    fn fit(cols: &[&[f64]], sim: &[f64], means: &[f64], ranges: &[f64]) -> Option<SimulatorMap> {
+        let m = cols.len();
+        let n = sim.len();
+        let degree = match m {
+            0..=4 => 3,
+            5..=8 => 2,
+            _ => 1,
+        };
+        // exponent tuples of every monomial of total degree 1..=degree
+        fn tuples(m: usize, left: usize, prefix: &mut Vec<u32>, out: &mut Vec<Vec<u32>>) {
+            if prefix.len() == m {
+                if prefix.iter().any(|e| *e > 0) {
+                    out.push(prefix.clone());
+                }
+                return;
             }
-            return;
+            for e in 0..=left {
+                prefix.push(e as u32);
+                tuples(m, left - e, prefix, out);
+                prefix.pop();
+            }
         }
-        for e in 0..=left {
-            prefix.push(e as u32);
-            tuples(m, left - e, prefix, out);
-            prefix.pop();
-        }
-    }
-    let mut exps = Vec::new();
-    tuples(m, degree, &mut Vec::new(), &mut exps);
-    let z: Vec<Vec<f64>> = (0..m)
-        .map(|j| {
-            inputs[j]
+        let mut exps = Vec::new();
+        tuples(m, degree, &mut Vec::new(), &mut exps);
+        let z: Vec<Vec<f64>> = (0..m)
+            .map(|j| cols[j].iter().map(|u| (u - means[j]) / ranges[j]).collect())
+            .collect();
+        let mut map = SimulatorMap {
+            exps,
+            coef: Vec::new(),
+            z,
+            ranges: ranges.to_vec(),
+        };
+        let mut basis: Vec<Vec<f64>> = vec![vec![1.0; n]];
+        basis.extend(
+            map.exps
                 .iter()
-                .map(|u| (u - means[j]) / ranges[j])
-                .collect()
-        })
-        .collect();
-    let mono = |e: &[u32], i: usize| -> f64 { (0..m).map(|j| z[j][i].powi(e[j] as i32)).product() };
-    let mut cols: Vec<Vec<f64>> = vec![vec![1.0; n]];
-    cols.extend(exps.iter().map(|e| (0..n).map(|i| mono(e, i)).collect()));
-    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-    let fit = lsq::fit(&refs, sim, &vec![true; n], &[]);
-    if fit.coef.iter().any(|c| !c.is_finite()) {
-        return vec![0.0; n];
+                .map(|e| (0..n).map(|i| map.mono(e, i)).collect()),
+        );
+        let refs: Vec<&[f64]> = basis.iter().map(|c| c.as_slice()).collect();
+        let fit = lsq::fit(&refs, sim, &vec![true; n], &[]);
+        if fit.coef.iter().any(|c| !c.is_finite()) {
+            return None;
+        }
+        map.coef = fit.coef;
+        Some(map)
     }
-    (0..n)
-        .map(|i| {
-            exps.iter()
-                .zip(&fit.coef[1..])
-                .filter(|(e, _)| e[k] > 0)
-                .map(|(e, c)| {
-                    let mut d = e.to_vec();
-                    d[k] -= 1;
-                    c * f64::from(e[k]) * mono(&d, i)
-                })
+
+    /// One monomial at row `i`.
+    fn mono(&self, e: &[u32], i: usize) -> f64 {
+        self.z
+            .iter()
+            .zip(e)
+            .map(|(z, p)| z[i].powi(*p as i32))
+            .product()
+    }
+
+    /// The map's value at row `i`.
+    fn value(&self, i: usize) -> f64 {
+        self.coef[0]
+            + self
+                .exps
+                .iter()
+                .zip(&self.coef[1..])
+                .map(|(e, c)| c * self.mono(e, i))
                 .sum::<f64>()
-                / ranges[k]
-        })
-        .collect()
+    }
+
+    /// Share of the variance of `sim` on the rows in `rows` that the map explains.
+    fn r2(&self, sim: &[f64], rows: &[bool]) -> f64 {
+        let idx: Vec<usize> = (0..sim.len()).filter(|&i| rows[i]).collect();
+        let vals: Vec<f64> = idx.iter().map(|&i| sim[i]).collect();
+        let (m, _) = signal::mean_std(&vals);
+        let tot: f64 = vals.iter().map(|v| (v - m) * (v - m)).sum();
+        let res: f64 = idx.iter().map(|&i| (sim[i] - self.value(i)).powi(2)).sum();
+        if tot > 0.0 { 1.0 - res / tot } else { 0.0 }
+    }
+
+    /// Derivative of the map in column `k`, row by row, in the column's own units.
+    fn derivative(&self, k: usize) -> Vec<f64> {
+        let n = self.z.first().map_or(0, |z| z.len());
+        (0..n)
+            .map(|i| {
+                self.exps
+                    .iter()
+                    .zip(&self.coef[1..])
+                    .filter(|(e, _)| e[k] > 0)
+                    .map(|(e, c)| {
+                        let mut d = e.to_vec();
+                        d[k] -= 1;
+                        c * f64::from(e[k]) * self.mono(&d, i)
+                    })
+                    .sum::<f64>()
+                    / self.ranges[k]
+            })
+            .collect()
+    }
 }
