@@ -306,6 +306,15 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
             c.cause.name()
         ));
     }
+    if !sel.tied.is_empty() {
+        let others: Vec<&str> = sel.tied.iter().map(|c| c.name()).collect();
+        warnings.push(format!(
+            "on this noise-free record the single extension(s) {} fit within {} % of the baseline's RMSE of {}'s: the record does not tell them apart (the one with fewer parameters, then the lower held-out error, is named; an excitation that moves the inputs more independently would decide)",
+            others.join(", "),
+            cfg.relevance_pct,
+            causes.first().map_or("the named cause", |c| c.name())
+        ));
+    }
     let verdict = if causes == [Cause::None] {
         if ratio(baseline_rmse) > UNEXPLAINED_RATIO {
             causes = vec![Cause::Unexplained];

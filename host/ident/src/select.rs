@@ -269,6 +269,9 @@ pub struct Selection {
     /// The direction tests (friction against a static map of the inputs), records with a
     /// state only.
     pub direction: Vec<DirectionTest>,
+    /// On a noise-free record: the other passing single causes whose held-out RMSE lies within
+    /// the relevance window of the first named cause's (the record does not tell them apart).
+    pub tied: Vec<Cause>,
 }
 
 /// Runs the candidates and the greedy multi-cause search.
@@ -343,6 +346,7 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
             baseline: base,
             steps: Vec::new(),
             direction,
+            tied: Vec::new(),
         };
     };
     // The residual flips with the direction of motion at equal inputs: a static map of the
@@ -506,6 +510,21 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
             None => break,
         }
     }
+    let tied = match causes
+        .first()
+        .and_then(|f| pool.iter().position(|c| c == f))
+    {
+        Some(fi) if noise_free => candidates
+            .iter()
+            .filter(|c| {
+                c.accepted
+                    && !causes.contains(&c.cause)
+                    && (c.rmse - candidates[fi].rmse).abs() <= window
+            })
+            .map(|c| c.cause)
+            .collect(),
+        _ => Vec::new(),
+    };
     Selection {
         causes,
         candidates,
@@ -513,5 +532,6 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
         extended: current,
         steps,
         direction,
+        tied,
     }
 }

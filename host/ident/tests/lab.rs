@@ -254,8 +254,17 @@ fn lab_circle_as_simulator_record() {
             misses.push(format!("{label}: {}", r.verdict));
         }
         if r.causes != [cause] {
-            eprintln!("  not exact: {label} named {:?}", r.causes);
-            if alone {
+            eprintln!(
+                "  not exact: {label} named {:?}: {:?}",
+                r.causes, r.warnings
+            );
+            // where the effect is not named alone the report says that its own cause fits
+            // as well (the record does not tell them apart)
+            let tie_reported = r
+                .warnings
+                .iter()
+                .any(|w| w.contains("does not tell them apart") && w.contains(cause.name()));
+            if alone || !tie_reported {
                 misses.push(format!("{label}: named {:?}: {}", r.causes, r.verdict));
             }
         }
