@@ -24,6 +24,7 @@ pub mod error;
 pub mod extension;
 pub mod generator;
 pub mod ident;
+mod lm;
 pub mod lsq;
 pub mod manipulator;
 pub mod matv5;

@@ -13,7 +13,6 @@
 //! starts at rest for its first input and never sees a measured output.
 
 use nalgebra::{DMatrix, DVector};
-use rayon::prelude::*;
 
 use crate::signal;
 
@@ -344,8 +343,8 @@ impl FitContext<'_> {
             .unwrap_or(f64::INFINITY)
     }
 
-    /// Levenberg-Marquardt on the entries of `(A, B)` minimising the free-run training error
-    /// (forward-difference Jacobian); returns the refined pair and its RSS.
+    /// Levenberg-Marquardt ([`crate::lm`]) on the entries of `(A, B)` minimising the free-run
+    /// training error; returns the refined pair and its RSS.
     fn refine(&self, a: DMatrix<f64>, b: DMatrix<f64>) -> (DMatrix<f64>, DMatrix<f64>, f64) {
         let (n, m) = (a.nrows(), b.ncols());
         let pack = |a: &DMatrix<f64>, b: &DMatrix<f64>| -> Vec<f64> {
@@ -357,70 +356,25 @@ impl FitContext<'_> {
                 DMatrix::from_column_slice(n, m, &t[n * n..]),
             )
         };
-        let mut theta = pack(&a, &b);
-        let Some(mut r) = self.residuals(&a, &b) else {
+        let theta = pack(&a, &b);
+        let Some(r) = self.residuals(&a, &b) else {
             return (a, b, f64::INFINITY);
         };
-        let mut cost: f64 = r.iter().map(|e| e * e).sum();
-        let np = theta.len();
-        let mut lambda = 1e-3;
-        for _ in 0..LM_ITERATIONS {
-            // Jacobian of the residuals, column by column: one simulation per parameter,
-            // independent of the others, so computed in parallel (landing in order)
-            let jac: Vec<Vec<f64>> = (0..np)
-                .into_par_iter()
-                .map(|j| {
-                    let h = 1e-6 * theta[j].abs().max(1e-2);
-                    let mut t = theta.clone();
-                    t[j] += h;
-                    let (ta, tb) = unpack(&t);
-                    match self.residuals(&ta, &tb) {
-                        Some(rj) => rj.iter().zip(&r).map(|(p, q)| (q - p) / h).collect(),
-                        None => vec![0.0; r.len()],
-                    }
-                })
-                .collect();
-            // normal equations of J dtheta = r (jac holds -dr/dtheta)
-            let mut jtj = DMatrix::<f64>::zeros(np, np);
-            let mut jtr = DVector::<f64>::zeros(np);
-            for a_ in 0..np {
-                jtr[a_] = jac[a_].iter().zip(&r).map(|(p, q)| p * q).sum();
-                for b_ in a_..np {
-                    let s: f64 = jac[a_].iter().zip(&jac[b_]).map(|(p, q)| p * q).sum();
-                    jtj[(a_, b_)] = s;
-                    jtj[(b_, a_)] = s;
-                }
-            }
-            let mut improved = false;
-            for _ in 0..8 {
-                let mut lhs = jtj.clone();
-                for d in 0..np {
-                    lhs[(d, d)] += lambda * jtj[(d, d)].max(1e-12);
-                }
-                let Some(step) = lhs.cholesky().map(|c| c.solve(&jtr)) else {
-                    lambda *= 10.0;
-                    continue;
-                };
-                let t: Vec<f64> = theta.iter().zip(step.iter()).map(|(p, s)| p + s).collect();
-                let (ta, tb) = unpack(&t);
-                if let Some(rt) = self.residuals(&ta, &tb) {
-                    let c: f64 = rt.iter().map(|e| e * e).sum();
-                    if c < cost {
-                        let rel = (cost - c) / cost.max(1e-300);
-                        theta = t;
-                        r = rt;
-                        cost = c;
-                        lambda = (lambda / 3.0).max(1e-9);
-                        improved = rel > 1e-7;
-                        break;
-                    }
-                }
-                lambda *= 10.0;
-            }
-            if !improved {
-                break;
-            }
-        }
+        let cost: f64 = r.iter().map(|e| e * e).sum();
+        let settings = crate::lm::Settings {
+            iterations: LM_ITERATIONS,
+            tolerance: 1e-7,
+            patience: 1,
+            diag_floor: 1e-12,
+            diag_add: 0.0,
+            steps: crate::lm::Steps::Floor(1e-2),
+            nonneg: &[],
+        };
+        let residuals = |t: &[f64]| {
+            let (ta, tb) = unpack(t);
+            self.residuals(&ta, &tb)
+        };
+        let (theta, _, cost, _) = crate::lm::minimise(theta, r, cost, &settings, &residuals);
         let (a, b) = unpack(&theta);
         (a, b, cost)
     }

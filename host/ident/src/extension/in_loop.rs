@@ -20,6 +20,7 @@ use super::dynamic_features::{LoopSignal, restoring_sign};
 use super::prepared::Prepared;
 use super::refined::{Cached, InLoopFit};
 use crate::cause::Cause;
+use crate::lm;
 use crate::lsq;
 use crate::signal;
 use crate::statespace::StateSpace;
@@ -84,9 +85,6 @@ impl Layout {
         self.cz() + self.n
     }
 }
-
-/// A damped step that lowered the cost: parameters, residuals, cost.
-type Trial = (Vec<f64>, Vec<f64>, f64);
 
 /// Everything one simulation needs.
 struct Loop<'a> {
@@ -601,8 +599,16 @@ impl Prepared<'_> {
             .filter(|(_, f)| f.1)
             .map(|(j, _)| lay.weights() + j)
             .collect();
-        let (th, r, _cost, jac) =
-            levenberg_marquardt(th, r, cost, &param_groups, &nonneg, &residuals);
+        let settings = lm::Settings {
+            iterations: ITERATIONS,
+            tolerance: TOLERANCE,
+            patience: 3,
+            diag_floor: 1e-300,
+            diag_add: 1e-300,
+            steps: lm::Steps::Groups(&param_groups),
+            nonneg: &nonneg,
+        };
+        let (th, r, _cost, jac) = lm::minimise(th, r, cost, &settings, &residuals);
         let pred = lp.simulate(&th, rows)?;
         let rss: f64 = (0..rows)
             .filter(|&i| self.train[i])
@@ -656,127 +662,4 @@ fn param_groups(lay: &Layout) -> [(usize, usize); 8] {
         (lay.x0(), lay.cz()),
         (lay.cz(), lay.len()),
     ]
-}
-
-/// Levenberg-Marquardt on a free-run cost from `(th, r, cost)`: finite-difference Jacobians
-/// (steps relative to each parameter group's size), bound-constrained steps that keep the
-/// parameters at `nonneg` non-negative, at most [`ITERATIONS`] iterations, stopping after three
-/// decreases in a row below [`TOLERANCE`]. Returns the parameters, residuals, cost and the
-/// last Jacobian (one column per parameter).
-fn levenberg_marquardt(
-    mut th: Vec<f64>,
-    mut r: Vec<f64>,
-    mut cost: f64,
-    param_groups: &[(usize, usize)],
-    nonneg: &[usize],
-    residuals: &(dyn Fn(&[f64]) -> Option<Vec<f64>> + Sync),
-) -> (Vec<f64>, Vec<f64>, f64, Vec<Vec<f64>>) {
-    let np = th.len();
-    let mut lambda = 1e-3;
-    let mut jac: Vec<Vec<f64>> = Vec::new();
-    let mut small = 0;
-    for _ in 0..ITERATIONS {
-        let mut scale = vec![0.0; np];
-        for &(g0, g1) in param_groups {
-            if g1 > g0 {
-                let rms = (th[g0..g1].iter().map(|v| v * v).sum::<f64>() / (g1 - g0) as f64).sqrt();
-                scale[g0..g1].iter_mut().for_each(|s| *s = rms);
-            }
-        }
-        // one simulation per parameter, independent of the others: the columns are
-        // computed in parallel (the bulk of the refinement's time) and land in order
-        jac = (0..np)
-            .into_par_iter()
-            .map(|j| {
-                let h = 1e-6 * (th[j].abs() + scale[j]).max(1e-12);
-                let mut t = th.clone();
-                t[j] += h;
-                match residuals(&t) {
-                    Some(rj) => rj.iter().zip(&r).map(|(p, q)| (q - p) / h).collect(),
-                    None => vec![0.0; r.len()],
-                }
-            })
-            .collect();
-        let mut jtj = DMatrix::<f64>::zeros(np, np);
-        let mut jtr = DVector::<f64>::zeros(np);
-        for p in 0..np {
-            jtr[p] = jac[p].iter().zip(&r).map(|(a, b)| a * b).sum();
-            for q in p..np {
-                let s: f64 = jac[p].iter().zip(&jac[q]).map(|(a, b)| a * b).sum();
-                jtj[(p, q)] = s;
-                jtj[(q, p)] = s;
-            }
-        }
-        // Bound-constrained steps: a dissipative weight at zero whose gradient points below
-        // zero is held there (its row and column leave the system). Clipping it after an
-        // unconstrained step instead spoils the step of every other parameter: a cause
-        // added at zero weights beside a refined one then never left zero (exactly 0 %
-        // gain for every second cause of the pairs).
-        for &p in nonneg {
-            if th[p] <= 0.0 && jtr[p] <= 0.0 {
-                for q in 0..np {
-                    jtj[(p, q)] = 0.0;
-                    jtj[(q, p)] = 0.0;
-                }
-                jtj[(p, p)] = 1.0;
-                jtr[p] = 0.0;
-            }
-        }
-        let mut improved = false;
-        let mut accepted = false;
-        // Up to 8 damped steps, lambda growing tenfold each: the first that lowers the cost
-        // is taken. They are tried as many at a time as the pool has threads (each is one
-        // free run) and taken in order, so the choice is the one-by-one choice.
-        // lambda times ten, k times over (as the one-by-one loop multiplied it)
-        let damping = |k: i32| (0..k).fold(lambda, |l, _| l * 10.0);
-        let trial = |k: i32| -> Option<Trial> {
-            let lam = damping(k);
-            let mut lhs = jtj.clone();
-            for d in 0..np {
-                lhs[(d, d)] += lam * jtj[(d, d)].max(1e-300) + 1e-300;
-            }
-            let step = lhs.cholesky().map(|ch| ch.solve(&jtr))?;
-            let mut t: Vec<f64> = th.iter().zip(step.iter()).map(|(p, s)| p + s).collect();
-            // projected step: dissipative weights stay non-negative
-            for &p in nonneg {
-                t[p] = t[p].max(0.0);
-            }
-            let rt = residuals(&t)?;
-            let ct: f64 = rt.iter().map(|e| e * e).sum();
-            (ct < cost).then_some((t, rt, ct))
-        };
-        let width = rayon::current_num_threads().clamp(1, 8) as i32;
-        let mut k = 0;
-        let mut found = None;
-        while k < 8 && found.is_none() {
-            let batch: Vec<i32> = (k..(k + width).min(8)).collect();
-            let outs: Vec<Option<Trial>> = batch.par_iter().map(|&q| trial(q)).collect();
-            found = batch
-                .into_iter()
-                .zip(outs)
-                .find_map(|(q, o)| o.map(|o| (q, o)));
-            k += width;
-        }
-        match found {
-            Some((q, (t, rt, ct))) => {
-                let rel = (cost - ct) / cost.max(1e-300);
-                th = t;
-                r = rt;
-                cost = ct;
-                lambda = (damping(q) / 3.0).max(1e-9);
-                improved = rel > TOLERANCE;
-                accepted = true;
-            }
-            None => lambda = damping(8),
-        }
-        // A small decrease ends the refinement only after three in a row: where a
-        // friction's sign makes the cost rough, one short step at high damping is no sign
-        // of convergence (a one-mass LuGre friction stopped after 11 iterations at twice
-        // the cost of the stop operators that then took its name).
-        small = if improved { 0 } else { small + 1 };
-        if !accepted || small >= 3 {
-            break;
-        }
-    }
-    (th, r, cost, jac)
 }
