@@ -164,10 +164,10 @@ pub(crate) fn minimise(
             }
             None => lambda = damping(8),
         }
-        // A small decrease ends the refinement only after three in a row: where a
-        // friction's sign makes the cost rough, one short step at high damping is no sign
-        // of convergence (a one-mass LuGre friction stopped after 11 iterations at twice
-        // the cost of the stop operators that then took its name).
+        // A small decrease ends the refinement only after `patience` in a row (the in-loop
+        // refinement waits for three: where a friction's sign makes the cost rough, one short
+        // step at high damping is no sign of convergence; a one-mass LuGre friction stopped
+        // after 11 iterations at twice the cost of the stop operators that then took its name).
         small = if improved { 0 } else { small + 1 };
         if !accepted || small >= settings.patience {
             break;

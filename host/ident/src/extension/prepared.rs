@@ -148,15 +148,15 @@ impl<'a> Prepared<'a> {
                     }
                     p
                 };
-                let up = eval(h);
-                let dn = eval(-h);
                 let j: Vec<f64> = if let Some(map) = &input_map {
                     // the simulator's output is given, not a function ident can evaluate:
                     // its sensitivity to each input is read off the simulated rows
                     map.derivative(k)
-                } else if matches!(baseline, Baseline::Simulator) {
+                } else if simulator {
                     vec![0.0; n]
                 } else {
+                    let up = eval(h);
+                    let dn = eval(-h);
                     up.iter()
                         .zip(&dn)
                         .map(|(a, b)| (a - b) / (2.0 * h))
@@ -340,7 +340,8 @@ pub const STATES_DETERMINE_R2: f64 = 0.9999;
 
 /// Per state `x_j` of a simulator record, `d sim_c / d x_j` row by row, when the states
 /// determine the simulated output of channel `c` (a cubic in them explains at least
-/// [`STATES_DETERMINE_R2`] of its training variance); empty otherwise. An effect inside the
+/// [`STATES_DETERMINE_R2`] of its training variance; at most four states, the most a cubic
+/// map is fitted in); empty otherwise. An effect inside the
 /// simulator then acts on its states: memory in a state, a state off by a constant or a
 /// factor, each reaching the output through this sensitivity.
 fn state_sensitivities(rec: &Record, c: usize, train: &[bool]) -> Vec<Vec<f64>> {
