@@ -7,7 +7,7 @@ use crate::cause::Cause;
 use crate::data::{Kind, Record};
 use crate::diagnostics::{self, Diagnostic, Hotspot};
 use crate::error::IdentError;
-use crate::extension::Prepared;
+use crate::extension::{Prepared, SetFit};
 use crate::select::{self, Candidate, Config};
 use crate::signal;
 use crate::split;
@@ -148,6 +148,7 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
     let baseline = Baseline::for_record(rec, &train, cfg.series_model, cfg.ocm)?;
     let prep = Prepared::new(rec, baseline.clone(), test.clone());
     let sel = select::select(&prep, cfg);
+    let (baseline, prep, sel) = lower_orders(rec, &test, cfg, baseline, prep, sel);
     let baseline_rmse = select::heldout_rmse(&prep, &sel.baseline.pred);
     let extended_rmse = select::heldout_rmse(&prep, &sel.extended.pred);
     let gain_pct = if baseline_rmse > 0.0 {
@@ -469,3 +470,59 @@ fn schema_warnings(rec: &Record, prep: &Prepared) -> Vec<String> {
     }
     w
 }
+
+/// Where a state-space baseline's extensions name a cause, the selection is run again on the
+/// baselines of up to [`LOWER_ORDERS`] lower orders, and the extended model of the lowest
+/// training criterion (BIC with the baseline's and the extensions' parameters together) is
+/// kept. The baseline's order is chosen on data that contain the effects, and the extra
+/// states absorb part of them: every pair record of seed 5000 chose the largest order (5),
+/// against 2, 4 and 3 for the one-mass, two-mass and chamber plants, and at their own orders
+/// the chamber's friction+stiffening and hysteresis+stiffening pairs are named exactly (87.8
+/// and 93.9 %), at order 5 neither. A record where nothing is named keeps its order (no
+/// false alarm can come from here).
+fn lower_orders<'a>(
+    rec: &'a Record,
+    test: &[bool],
+    cfg: &Config,
+    baseline: Baseline,
+    prep: Prepared<'a>,
+    sel: select::Selection,
+) -> (Baseline, Prepared<'a>, select::Selection) {
+    let Baseline::StateSpace(ss) = &baseline else {
+        return (baseline, prep, sel);
+    };
+    if sel.causes.iter().all(|c| *c == Cause::None) {
+        return (baseline, prep, sel);
+    }
+    let n = ss.order();
+    let m = rec.inputs.len();
+    let p = rec.outputs.len();
+    let criterion = |order: usize, f: &SetFit| -> f64 {
+        let rows = f.rows.max(1) as f64;
+        let k = order * (order + m) + p * (order + m + 1) + f.extra_params;
+        f.rss.iter().map(|r| rows * r.max(1e-300).ln()).sum::<f64>()
+            + k as f64 * (rows * p as f64).ln()
+    };
+    let mut best_c = criterion(n, &sel.extended);
+    let mut best = (baseline.clone(), prep, sel);
+    for order in (n.saturating_sub(LOWER_ORDERS).max(1)..n).rev() {
+        let Some(alt) = ss.at_lower_order(order) else {
+            continue;
+        };
+        let b = Baseline::StateSpace(Box::new(alt));
+        let pr = Prepared::new(rec, b.clone(), test.to_vec());
+        let se = select::select(&pr, cfg);
+        if se.causes.iter().all(|c| *c == Cause::None) {
+            continue;
+        }
+        let c = criterion(order, &se.extended);
+        if c < best_c {
+            best_c = c;
+            best = (b, pr, se);
+        }
+    }
+    best
+}
+
+/// Lower baseline orders tried once a cause is named (see [`lower_orders`]).
+const LOWER_ORDERS: usize = 2;

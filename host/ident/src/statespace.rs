@@ -44,9 +44,24 @@ pub struct StateSpace {
     pub u_mean: Vec<f64>,
     /// Per order tried: (order, training free-run RMSE pooled over outputs, BIC).
     pub orders: Vec<(usize, f64, f64)>,
+    /// The refined `(A, B)` of the orders tried below the chosen one (lowest first).
+    pub lower: Vec<(DMatrix<f64>, DMatrix<f64>)>,
 }
 
 impl StateSpace {
+    /// The same model at a lower order tried by [`StateSpace::identify`] (`None` when that
+    /// order was not tried).
+    pub fn at_lower_order(&self, n: usize) -> Option<StateSpace> {
+        let (a, b) = self.lower.iter().find(|(a, _)| a.nrows() == n)?;
+        Some(StateSpace {
+            a: a.clone(),
+            b: b.clone(),
+            u_mean: self.u_mean.clone(),
+            orders: self.orders.clone(),
+            lower: Vec::new(),
+        })
+    }
+
     /// The model order `n`.
     pub fn order(&self) -> usize {
         self.a.nrows()
@@ -157,6 +172,7 @@ impl StateSpace {
         let gamma = HORIZONS
             .iter()
             .find_map(|&h| observability(&du_ref, outputs, starts, train, h));
+        let mut tried = Vec::new();
         for n in 1..=MAX_ORDER {
             let Some((a, b)) = gamma.as_ref().and_then(|(g, p)| initial_ab(g, *p, n, &ctx)) else {
                 break;
@@ -164,6 +180,7 @@ impl StateSpace {
             let (a, b, rss) = ctx.refine(a, b);
             let score = bic(rss, n);
             orders.push((n, (rss / n_obs.max(1) as f64).sqrt(), score));
+            tried.push((a.clone(), b.clone()));
             if score < best.0 {
                 best = (score, a, b);
             } else if orders.len() >= 3 && orders[orders.len() - 2].2 > best.0 {
@@ -171,11 +188,17 @@ impl StateSpace {
                 break;
             }
         }
+        let chosen = best.1.nrows();
+        let lower = tried
+            .into_iter()
+            .filter(|(a, _)| a.nrows() < chosen)
+            .collect();
         StateSpace {
             a: best.1,
             b: best.2,
             u_mean,
             orders,
+            lower,
         }
     }
 }

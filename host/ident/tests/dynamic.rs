@@ -220,8 +220,8 @@ const PAIRS: [[Cause; 2]; 3] = [
     [Cause::Hysteresis, Cause::Friction],
 ];
 
-/// Regression floor of the exact-pair share, percent: measured 4 of 9 with one seed (seed
-/// 5000) since ordinary sets also start from the flexible variants' refinements (2 of 9
-/// before: the two-mass hysteresis+stiffening and the one-mass hysteresis+friction records
-/// are now named exactly). The 80 % is not reached, see the README.
-const PAIR_FLOOR_PCT: usize = 44;
+/// Regression floor of the exact-pair share, percent: measured 6 of 9 with one seed (seed
+/// 5000) since a named cause sends the selection to the baseline's lower orders too (4 of 9
+/// before, 2 of 9 before ordinary sets started from the flexible variants). The 80 %
+/// is not reached, see the README.
+const PAIR_FLOOR_PCT: usize = 66;
