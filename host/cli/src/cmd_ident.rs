@@ -38,7 +38,8 @@ impl KindArg {
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SeriesBaseline {
     /// Linear state-space model (subspace identification refined on free-run simulation
-    /// error, order by BIC): for dynamic systems; the static map is reported beside it.
+    /// error, order by BIC; once a cause is named, up to two lower orders are tried with the
+    /// extensions): for dynamic systems; the static map is reported beside it.
     StateSpace,
     /// Static affine map y = A u + b: for quasi-static systems; the state-space model is
     /// reported beside it.

@@ -160,8 +160,18 @@ impl Baseline {
                 "the simulator's prediction (sim_ columns) as given, no free parameter".into()
             }
             Baseline::StateSpace(ss) => format!(
-                "linear state-space model of order {} (PO-MOESP, refined on free-run error; order by BIC of the free-run training error: {}), free-run predictions",
+                "linear state-space model of order {}{} (PO-MOESP, refined on free-run error; order by BIC of the free-run training error: {}), free-run predictions",
                 ss.order(),
+                if ss
+                    .orders
+                    .iter()
+                    .min_by(|a, b| a.2.total_cmp(&b.2))
+                    .is_some_and(|o| o.0 != ss.order())
+                {
+                    ", a lower order than the linear model's BIC chose, kept because the extended model's BIC is lower there"
+                } else {
+                    ""
+                },
                 ss.orders
                     .iter()
                     .map(|(n, r, b)| format!("n={n}: RMSE {r:.3e}, BIC {b:.0}"))
