@@ -497,12 +497,9 @@ fn lower_orders<'a>(
     let n = ss.order();
     let m = rec.inputs.len();
     let p = rec.outputs.len();
-    let criterion = |order: usize, f: &SetFit| -> f64 {
-        let rows = f.rows.max(1) as f64;
-        let k = order * (order + m) + p * (order + m + 1) + f.extra_params;
-        f.rss.iter().map(|r| rows * r.max(1e-300).ln()).sum::<f64>()
-            + k as f64 * (rows * p as f64).ln()
-    };
+    // the baseline's parameters count too: the sets compared have different baselines
+    let criterion =
+        |order: usize, f: &SetFit| select::bic(f, order * (order + m) + p * (order + m + 1));
     let mut best_c = criterion(n, &sel.extended);
     let mut best = (baseline.clone(), prep, sel);
     for order in (n.saturating_sub(LOWER_ORDERS).max(1)..n).rev() {

@@ -274,6 +274,15 @@ pub struct Selection {
     pub tied: Vec<Cause>,
 }
 
+/// Bayesian information criterion of a set fit on its training rows: `N ln(RSS)` per channel
+/// plus `ln(N x channels)` per parameter, counting the extensions' parameters and
+/// `baseline_params` more (0 when the sets compared share one baseline).
+pub fn bic(f: &SetFit, baseline_params: usize) -> f64 {
+    let n = f.rows.max(1) as f64;
+    f.rss.iter().map(|r| n * r.max(1e-300).ln()).sum::<f64>()
+        + (f.extra_params + baseline_params) as f64 * (n * f.rss.len() as f64).ln()
+}
+
 /// Runs the candidates and the greedy multi-cause search.
 pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
     let base = prep.fit_set(&[]);
@@ -412,11 +421,7 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
     }
     // Parsimony: a named cause is swapped for an unnamed one when the swapped set has the
     // better information criterion (e.g. an offset that a polynomial also covers).
-    let bic = |f: &SetFit| -> f64 {
-        let n = f.rows.max(1) as f64;
-        f.rss.iter().map(|r| n * r.max(1e-300).ln()).sum::<f64>()
-            + f.extra_params as f64 * (n * prep.channels.len() as f64).ln()
-    };
+    let bic = |f: &SetFit| bic(f, 0);
     for _ in 0..2 {
         let mut improved = false;
         for i in 0..causes.len() {
