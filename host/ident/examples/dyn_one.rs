@@ -39,6 +39,7 @@ fn main() {
     let id = identify(&g.record, &cfg).expect("identification");
     let r = &id.report;
     println!("baseline: {}", r.baseline);
+    println!("verdict: {}", r.verdict);
     println!(
         "named {:?}, ratios {:.1?}, gain {:.1} %, {}",
         r.causes, g.ratios, r.gain_pct, g.details

@@ -13,9 +13,10 @@
 //! (or a passing one whose held-out RMSE is lower by at least `min_extra_gain_pct`);
 //! further causes are added greedily while the combined extension passes the same three tests
 //! against the current one and gains at least `min_extra_gain_pct` more on held-out data, and
-//! does the same against the most flexible variant of the first cause (friction: with
-//! pre-sliding lags and a stroke-dependent level), so that the leftovers of an imperfect first
-//! extension are not named as a second cause.
+//! does the same against the most flexible variant of the first cause (each inside its own
+//! class: hysteresis with a narrower loop, friction with stiffer pre-sliding, stiffening to
+//! higher powers), so that the leftovers of an imperfect first extension are not named as a
+//! second cause.
 //! Finally each named cause is swapped for an unnamed one when that improves the BIC by more
 //! than the margin, or when the swapped set has fewer parameters and a BIC within the margin
 //! (parsimony when one extension's span contains another's: Occam's window), unless the swap

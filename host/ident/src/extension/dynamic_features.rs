@@ -13,10 +13,15 @@ use crate::statespace::StateSpace;
 /// Half-width of dry friction's pre-sliding stop operator inside the dynamics, as a fraction of
 /// the output's range: the displacement over which a sticking contact's force builds up
 /// before it slides (micrometres in metal contacts, a fraction of a millimetre in seals; a
-/// few tenths of a percent of a stroke). It is also the narrowest hysteresis element: the two
-/// causes share it and differ in what they add to it, forces of the velocity (friction) or
-/// wider loops (hysteresis, 1.5-28 %); see the README.
+/// few tenths of a percent of a stroke). It is the boundary between the two classes of
+/// rate-independent loops: a force that saturates within it is friction's, one that goes on
+/// growing over wider excursions (the stops of `PLAY_WIDTHS`, 0.5-28 %) is hysteresis'; see
+/// the README ("Telling friction from hysteresis").
 const PRESLIDING: f64 = 0.0025;
+
+/// Friction's most flexible variant: narrower pre-sliding stops beside `PRESLIDING` (a stiffer
+/// contact, down to a Coulomb force that reverses at once), still inside friction's class.
+const FLEXIBLE_PRESLIDING: [f64; 2] = [0.0005, 0.001];
 
 /// A signal of the model's own output that enters the dynamics where an input force does;
 /// evaluated step by step, so that the in-loop fit ([`super::in_loop`]) can feed the extended
@@ -114,26 +119,22 @@ impl Prepared<'_> {
         let x = &self.channels[c].yhat;
         let name = &self.rec.outputs[c].name;
         let mut signals = Vec::new();
-        // The most flexible variant of each (while a further cause is tested against it):
-        // hysteresis with a near-zero width (a stop operator that saturates at once is a dry
-        // friction force), friction with pre-sliding (narrow stop operators: the force follows
-        // the displacement elastically before it slides, as in LuGre's bristles), stiffening
-        // to the fifth power.
+        // The most flexible variant of each (while a further cause is tested against it),
+        // each inside its own class: hysteresis with a narrower loop (0.5 % of the range),
+        // friction with stiffer pre-sliding (narrower stops), stiffening to the fifth power.
+        // Neither variant reaches into the other's widths: a Preisach plane contains a relay
+        // of zero width, which is a Coulomb force, so a hysteresis allowed every width absorbs
+        // a friction beside it and the pair cannot be named.
         let rich = self.flexible.get() == Some(cause);
         match cause {
             Cause::Hysteresis => {
                 // elastic-perfectly-plastic elements (stop operators) on the displacement:
-                // a Prandtl-Ishlinskii restoring force
-                // The narrowest element is friction's pre-sliding stop, shared by both causes
-                // (a refinement of one then starts from the other's optimum); the wider ones are
-                // what a loop that grows with the excursion needs.
+                // a Prandtl-Ishlinskii restoring force whose loop grows with the excursion
+                // after a reversal, over 1.5-28 % of the range (from 0.5 % in the flexible
+                // variant); what saturates within friction's pre-sliding is friction's
                 let range = span(x);
-                let narrow: &[f64] = if rich {
-                    &[0.0005, PRESLIDING, 0.005]
-                } else {
-                    &[PRESLIDING]
-                };
-                for &w in narrow.iter().chain(&PLAY_WIDTHS[1..]) {
+                let first = if rich { 0 } else { 1 };
+                for &w in &PLAY_WIDTHS[first..] {
                     let r = w * range;
                     signals.push((
                         LoopSignal::Stop(r),
@@ -165,7 +166,7 @@ impl Prepared<'_> {
                     format!("Coulomb friction with pre-sliding r={r:.4} on {name}"),
                 ));
                 if rich {
-                    for w in [0.015, 0.035] {
+                    for w in FLEXIBLE_PRESLIDING {
                         let r = w * range;
                         signals.push((
                             LoopSignal::Stop(r),

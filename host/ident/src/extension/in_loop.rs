@@ -440,9 +440,9 @@ impl Prepared<'_> {
             Some(t)
         };
         // A refinement of another set mapped onto this layout by its signals: every signal
-        // both sets hold (a stop operator of the same width in friction's pre-sliding and in
-        // hysteresis' loops) starts at the weight it had there, the rest at zero; `None` when
-        // the layouts differ or no signal is shared.
+        // both sets hold (a cause's ordinary signals inside its flexible variant, or inside a
+        // larger set) starts at the weight it had there, the rest at zero; `None` when the
+        // layouts differ or no signal is shared.
         let by_signal = |e: &Cached| -> Option<Vec<f64>> {
             if e.channel != c
                 || e.shared.len() != lay.weights()
@@ -500,10 +500,8 @@ impl Prepared<'_> {
             .collect();
         // Starts from the refinements of other sets that share a signal with this one (not
         // subsets, mapped above): two extensions whose spans overlap then start from each
-        // other's optimum. A friction refined from its linear fit put the load on the smooth
-        // sign of the velocity and left its pre-sliding stop at the bound zero, at 1.8 times
-        // the cost of the hysteresis that fitted the same stop alone (a one-mass LuGre record
-        // named `hysteresis`).
+        // other's optimum (a friction alone from a friction+stiffening set, a cause's
+        // ordinary form from its flexible variant).
         // An ordinary set also starts from every refinement of a most flexible variant
         // (whatever its causes), mapped by the signals they share: the extra signals open
         // ways down that the ordinary set's own starts do not reach. On a two-mass
