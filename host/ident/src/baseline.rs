@@ -160,7 +160,7 @@ impl Baseline {
                 "the simulator's prediction (sim_ columns) as given, no free parameter".into()
             }
             Baseline::StateSpace(ss) => format!(
-                "linear state-space model of order {}{} (PO-MOESP, refined on free-run error; order by BIC of the free-run training error: {}), free-run predictions",
+                "linear state-space model of order {}{}{} (PO-MOESP, refined on free-run error; order by BIC of the free-run training error: {}), free-run predictions",
                 ss.order(),
                 if ss
                     .orders
@@ -171,6 +171,14 @@ impl Baseline {
                     ", a lower order than the linear model's BIC chose, kept because the extended model's BIC is lower there"
                 } else {
                     ""
+                },
+                if ss.entry_lag > 0.0 {
+                    format!(
+                        ", the extensions' forces entering after a lag of {:.1} samples (a real pole of the baseline; kept because the extended model's BIC is lower than with the forces entering where the inputs do)",
+                        ss.entry_lag
+                    )
+                } else {
+                    String::new()
                 },
                 ss.orders
                     .iter()

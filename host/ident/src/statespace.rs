@@ -46,6 +46,9 @@ pub struct StateSpace {
     pub orders: Vec<(usize, f64, f64)>,
     /// The refined `(A, B)` of the orders tried below the chosen one (lowest first).
     pub lower: Vec<(DMatrix<f64>, DMatrix<f64>)>,
+    /// Samples of lag between where the input drives the states and where an extension's
+    /// force acts (0: along `B`, as the input does); see [`StateSpace::force_entry`].
+    pub entry_lag: f64,
 }
 
 impl StateSpace {
@@ -59,7 +62,63 @@ impl StateSpace {
             u_mean: self.u_mean.clone(),
             orders: self.orders.clone(),
             lower: Vec::new(),
+            entry_lag: 0.0,
         })
+    }
+
+    /// The same model with an extension's force entering after a lag of `lag` samples.
+    pub fn with_entry_lag(&self, lag: f64) -> StateSpace {
+        StateSpace {
+            a: self.a.clone(),
+            b: self.b.clone(),
+            u_mean: self.u_mean.clone(),
+            orders: self.orders.clone(),
+            lower: self.lower.clone(),
+            entry_lag: lag,
+        }
+    }
+
+    /// Where an extension's force enters the states, per input: `B + l (A - I) B` with `l`
+    /// the [`StateSpace::entry_lag`] (in continuous time `(I + tau A_c) B`). When the input
+    /// reaches the structure through a first-order lag of `l` samples (a pneumatic chamber's
+    /// filling), that lag's mode has the eigenvalue `1 - 1/l`, so the factor removes it and
+    /// keeps the rest: the force acts on the structure itself, not through the actuator. The
+    /// choice does not depend on the state's coordinates.
+    pub fn force_entry(a: &DMatrix<f64>, b: &DMatrix<f64>, lag: f64) -> DMatrix<f64> {
+        if lag == 0.0 {
+            return b.clone();
+        }
+        let n = a.nrows();
+        b + (a - DMatrix::<f64>::identity(n, n)) * b * lag
+    }
+
+    /// Candidate entry lags (samples) from the real poles `0 < a < 1` of `A` and of the lower
+    /// orders tried: `1 / (1 - a)`, kept between [`MIN_ENTRY_LAG`] and [`MAX_ENTRY_LAG`],
+    /// lags within 20 % of a longer one dropped, longest first, at most [`ENTRY_LAGS`]. The
+    /// lower orders count because an actuator's lag shows as a real pole at the plant's own
+    /// order and can pair with another state into a complex pole above it.
+    pub fn entry_lag_candidates(&self) -> Vec<f64> {
+        let per_order: Vec<Vec<f64>> = std::iter::once(&self.a)
+            .chain(self.lower.iter().map(|(a, _)| a))
+            .map(|a| {
+                a.complex_eigenvalues()
+                    .iter()
+                    .filter(|e| e.im.abs() < 1e-9 * e.re.abs().max(1.0) && e.re > 0.0 && e.re < 1.0)
+                    .map(|e| 1.0 / (1.0 - e.re))
+                    .filter(|l| (MIN_ENTRY_LAG..=MAX_ENTRY_LAG).contains(l))
+                    .collect()
+            })
+            .collect();
+        let mut lags: Vec<f64> = per_order.into_iter().flatten().collect();
+        lags.sort_by(|a, b| b.total_cmp(a));
+        let mut kept: Vec<f64> = Vec::new();
+        for l in lags {
+            if kept.last().is_none_or(|k| l < 0.8 * k) {
+                kept.push(l);
+            }
+        }
+        kept.truncate(ENTRY_LAGS);
+        kept
     }
 
     /// The model order `n`.
@@ -88,7 +147,8 @@ impl StateSpace {
     }
 
     /// The response of an output with map `(c_row, d_k)` to a signal `f` entering the dynamics
-    /// where input `k` does (through column `k` of `B`), from rest at each segment start.
+    /// as a force of input `k` does (column `k` of [`StateSpace::force_entry`]), from rest at
+    /// each segment start.
     pub fn filter(
         &self,
         f: &[f64],
@@ -98,7 +158,9 @@ impl StateSpace {
         starts: &[usize],
     ) -> Vec<f64> {
         let n = self.order();
-        let bk = self.b.columns(k, 1).into_owned();
+        let bk = Self::force_entry(&self.a, &self.b, self.entry_lag)
+            .columns(k, 1)
+            .into_owned();
         let x = simulate(&self.a, &bk, &[f], starts, f.len(), n);
         let mut out: Vec<f64> = f.iter().map(|v| d_k * v).collect();
         for (j, xs) in x.iter().enumerate() {
@@ -199,9 +261,18 @@ impl StateSpace {
             u_mean,
             orders,
             lower,
+            entry_lag: 0.0,
         }
     }
 }
+
+/// Shortest entry lag tried (samples): a faster lag is within a sample of none.
+pub const MIN_ENTRY_LAG: f64 = 2.0;
+/// Longest entry lag tried (samples): slower real poles are drifts the record barely
+/// determines, not an actuator.
+pub const MAX_ENTRY_LAG: f64 = 60.0;
+/// Most entry lags tried per record.
+pub const ENTRY_LAGS: usize = 3;
 
 /// States of `x[k+1] = A x[k] + B v[k]`, each segment starting at the rest state of its first
 /// input (`x = (I - A)^-1 B v`, or zero when `I - A` is singular); `[state][row]`.
@@ -643,5 +714,58 @@ mod tests {
             rmse < 1.5 * sd,
             "held-out free-run RMSE {rmse} vs noise {sd}"
         );
+    }
+
+    /// An actuator lag in front of an oscillator, `z+ = a z + (1 - a) u` driving
+    /// `x+ = A_p x + b_p z`: the force entry at the lag `1 / (1 - a)` is exactly where `z`
+    /// drives the oscillator, `[0, b_p]` (worked by hand: `B + l (A - I) B` with
+    /// `(A - I) B = (1 - a) [a - 1, b_p]`), in any coordinates of the state, and the lag is
+    /// among the candidates read from `A`'s real poles.
+    #[test]
+    fn the_force_entry_skips_an_actuator_lag() {
+        let a_lag = 0.92;
+        let (wn, zeta, dt) = (2.0 * std::f64::consts::PI, 0.1, 0.01);
+        let a = DMatrix::from_row_slice(
+            3,
+            3,
+            &[
+                a_lag,
+                0.0,
+                0.0,
+                0.0,
+                1.0,
+                dt,
+                0.3 * dt,
+                -wn * wn * dt,
+                1.0 - 2.0 * zeta * wn * dt,
+            ],
+        );
+        let b = DMatrix::from_column_slice(3, 1, &[1.0 - a_lag, 0.0, 0.0]);
+        let lag = 1.0 / (1.0 - a_lag);
+        let e = StateSpace::force_entry(&a, &b, lag);
+        let want = [0.0, 0.0, 0.3 * dt];
+        for j in 0..3 {
+            assert!((e[(j, 0)] - want[j]).abs() < 1e-14, "{e}");
+        }
+        assert_eq!(StateSpace::force_entry(&a, &b, 0.0), b);
+        // a change of coordinates T moves the entry with the state
+        let t = DMatrix::from_row_slice(3, 3, &[1.0, 0.4, -0.2, 0.3, 2.0, 0.1, -0.5, 0.2, 1.5]);
+        let ti = t.clone().try_inverse().unwrap();
+        let et = StateSpace::force_entry(&(&t * &a * &ti), &(&t * &b), lag);
+        let moved = &t * &e;
+        for j in 0..3 {
+            assert!((et[(j, 0)] - moved[j]).abs() < 1e-12, "{et} vs {moved}");
+        }
+        let ss = StateSpace {
+            a,
+            b,
+            u_mean: vec![0.0],
+            orders: Vec::new(),
+            lower: Vec::new(),
+            entry_lag: 0.0,
+        };
+        let c = ss.entry_lag_candidates();
+        assert_eq!(c.len(), 1, "{c:?}");
+        assert!((c[0] - lag).abs() < 1e-9 * lag, "{c:?}");
     }
 }

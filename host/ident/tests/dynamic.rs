@@ -259,3 +259,31 @@ fn friction_and_hysteresis_are_told_apart_by_the_width_of_their_loops() {
         assert!(r.gain_pct > 75.0, "{effects:?}: {}", r.verdict);
     }
 }
+
+/// Where the force enters (README, "Where the force enters: a property of the baseline"): on
+/// a pneumatic chamber the supply reaches the piston through the filling's lag, while a
+/// stiffening spring acts on the piston itself. Entering where the input does, the cubic of
+/// seed 1001 explained 68 % of the held-out error and left 13x the noise; entering after the
+/// lag read off a lower order's real pole, it explains more than 95 % and is named alone.
+#[test]
+fn a_chamber_stiffening_acts_after_the_filling_lag() {
+    let cfg = Config {
+        series_model: SeriesModel::StateSpace,
+        ..Config::default()
+    };
+    let g = generate(&DynSpec {
+        system: System::Chamber,
+        effects: vec![Cause::Nonlinearity],
+        seed: 1001,
+        rows: 2000,
+    });
+    let id = identify(&g.record, &cfg).unwrap();
+    let r = &id.report;
+    assert_eq!(r.causes, [Cause::Nonlinearity], "{}", r.verdict);
+    assert!(r.gain_pct > 95.0, "{}", r.verdict);
+    assert!(
+        r.baseline.contains("after a lag of"),
+        "the force should enter after the filling's lag: {}",
+        r.baseline
+    );
+}

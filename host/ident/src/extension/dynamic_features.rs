@@ -95,7 +95,9 @@ pub(super) fn restoring_sign(
     horizon: usize,
 ) -> Option<f64> {
     let n = ss.order();
-    let mut x = ss.b.columns(k, 1).into_owned();
+    let mut x = StateSpace::force_entry(&ss.a, &ss.b, ss.entry_lag)
+        .columns(k, 1)
+        .into_owned();
     let mut step = d_k;
     let mut steps = Vec::with_capacity(horizon.max(1));
     for _ in 0..horizon.max(1) {

@@ -102,6 +102,8 @@ struct Loop<'a> {
     /// dissipative signal, see [`restoring_sign`], else 1) and whether the weight is kept
     /// non-negative.
     factor: Vec<(f64, bool)>,
+    /// The baseline's [`StateSpace::entry_lag`] (samples), held while `A` and `B` are refined.
+    entry_lag: f64,
 }
 
 impl Loop<'_> {
@@ -140,6 +142,32 @@ impl Loop<'_> {
 
     /// Free-run output of the extended model on rows `..rows`; `None` when it diverges.
     fn simulate(&self, th: &[f64], rows: usize) -> Option<Vec<f64>> {
+        let m = self.lay.m;
+        // the next state `A x + B u_i + B_f f` (`B (u_i + f)` when the force enters as the
+        // input does)
+        let step = |xn: &mut [f64],
+                    ax: &[f64],
+                    bf: &[f64],
+                    ff: Option<&[f64]>,
+                    i: usize,
+                    force: &[f64]| {
+            for j in 0..xn.len() {
+                let mut acc = ax[j];
+                match ff {
+                    None => {
+                        for k in 0..m {
+                            acc += bf[j * m + k] * (self.du[k][i] + force[k]);
+                        }
+                    }
+                    Some(ff) => {
+                        for k in 0..m {
+                            acc += bf[j * m + k] * self.du[k][i] + ff[j * m + k] * force[k];
+                        }
+                    }
+                }
+                xn[j] = acc;
+            }
+        };
         let l = &self.lay;
         let (n, m, ns) = (l.n, l.m, self.signals.len());
         debug_assert!(ns <= 24);
@@ -148,6 +176,12 @@ impl Loop<'_> {
         // row-major copies for the inner loop
         let af: Vec<f64> = (0..n * n).map(|t| a[(t / n, t % n)]).collect();
         let bf: Vec<f64> = (0..n * m).map(|t| b[(t / m, t % m)]).collect();
+        // the force's own entry, only when it differs from the input's: `B (u + f)` and
+        // `B u + B_f f` differ in the last bits, and the refinements are that sensitive
+        let ff: Option<Vec<f64>> = (self.entry_lag != 0.0).then(|| {
+            let e = StateSpace::force_entry(&a, &b, self.entry_lag);
+            (0..n * m).map(|t| e[(t / m, t % m)]).collect()
+        });
         let cv = &th[l.c()..l.d()];
         let dv = &th[l.d()..l.bias()];
         let bias = th[l.bias()];
@@ -205,13 +239,7 @@ impl Loop<'_> {
                 }
                 // the next state with the force held: a one-step look-ahead gives a central
                 // velocity without a half-sample lag at reversals
-                for j in 0..n {
-                    let mut acc = ax[j];
-                    for k in 0..m {
-                        acc += bf[j * m + k] * (self.du[k][i] + force[k]);
-                    }
-                    xn[j] = acc;
-                }
+                step(&mut xn, &ax, &bf, ff.as_deref(), i, &force);
                 let (z_next, t_next) = if i + 1 < e {
                     (y_of(cz, &xn, i + 1), self.time_s[i + 1])
                 } else {
@@ -246,13 +274,7 @@ impl Loop<'_> {
                 }
                 out[i] = out_i;
                 z_prev = z;
-                for j in 0..n {
-                    let mut acc = ax[j];
-                    for k in 0..m {
-                        acc += bf[j * m + k] * (self.du[k][i] + force[k]);
-                    }
-                    xn[j] = acc;
-                }
+                step(&mut xn, &ax, &bf, ff.as_deref(), i, &force);
                 std::mem::swap(&mut x, &mut xn);
                 if !out_i.is_finite() || x.iter().any(|v| !v.is_finite() || v.abs() > 1e150) {
                     return None;
@@ -354,6 +376,7 @@ impl Prepared<'_> {
             drives: drives.clone(),
             map,
             factor,
+            entry_lag: ss.entry_lag,
         };
         let lay = &lp.lay;
         // start: the baseline's dynamics, the joint fit's output map and weights, and the
