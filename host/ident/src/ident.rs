@@ -532,10 +532,11 @@ fn lower_orders<'a>(
 /// 16-60 % with both effects at 5-50 times the noise). A lag freed in every candidate's
 /// refinement blurred friction against hysteresis (README), so here it is a property of the
 /// baseline, like its order: the whole selection runs again with the force entering after
-/// each candidate lag (the baseline's real poles, [`StateSpace::entry_lag_candidates`]),
-/// every candidate then compared with the same entry, and the extended model of the lowest
-/// training BIC (one parameter more for the lag) is kept. A record where nothing is named
-/// keeps the input's entry.
+/// each candidate lag (real poles of the baseline and of its lower orders,
+/// [`StateSpace::entry_lag_candidates`]), every candidate then compared with the same entry.
+/// A lag's model is kept when its training BIC (one parameter more) is the lowest, it loses no
+/// held-out accuracy, and the set named without the lag fits better with it. A record where
+/// nothing is named keeps the input's entry.
 fn entry_lags<'a>(
     rec: &'a Record,
     test: &[bool],

@@ -69,12 +69,8 @@ impl StateSpace {
     /// The same model with an extension's force entering after a lag of `lag` samples.
     pub fn with_entry_lag(&self, lag: f64) -> StateSpace {
         StateSpace {
-            a: self.a.clone(),
-            b: self.b.clone(),
-            u_mean: self.u_mean.clone(),
-            orders: self.orders.clone(),
-            lower: self.lower.clone(),
             entry_lag: lag,
+            ..self.clone()
         }
     }
 
@@ -98,18 +94,13 @@ impl StateSpace {
     /// lower orders count because an actuator's lag shows as a real pole at the plant's own
     /// order and can pair with another state into a complex pole above it.
     pub fn entry_lag_candidates(&self) -> Vec<f64> {
-        let per_order: Vec<Vec<f64>> = std::iter::once(&self.a)
+        let mut lags: Vec<f64> = std::iter::once(&self.a)
             .chain(self.lower.iter().map(|(a, _)| a))
-            .map(|a| {
-                a.complex_eigenvalues()
-                    .iter()
-                    .filter(|e| e.im.abs() < 1e-9 * e.re.abs().max(1.0) && e.re > 0.0 && e.re < 1.0)
-                    .map(|e| 1.0 / (1.0 - e.re))
-                    .filter(|l| (MIN_ENTRY_LAG..=MAX_ENTRY_LAG).contains(l))
-                    .collect()
-            })
+            .flat_map(|a| a.complex_eigenvalues().iter().copied().collect::<Vec<_>>())
+            .filter(|e| e.im.abs() < 1e-9 * e.re.abs().max(1.0) && e.re > 0.0 && e.re < 1.0)
+            .map(|e| 1.0 / (1.0 - e.re))
+            .filter(|l| (MIN_ENTRY_LAG..=MAX_ENTRY_LAG).contains(l))
             .collect();
-        let mut lags: Vec<f64> = per_order.into_iter().flatten().collect();
         lags.sort_by(|a, b| b.total_cmp(a));
         let mut kept: Vec<f64> = Vec::new();
         for l in lags {
