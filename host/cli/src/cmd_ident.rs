@@ -152,6 +152,11 @@ pub struct IdentArgs {
     /// Smallest held-out RMSE gain (percent) for a cause to be named.
     #[arg(long, default_value_t = 2.0)]
     pub min_gain: f64,
+    /// State-space baselines: search the baseline's lower orders and where the extensions'
+    /// forces enter only when the named causes leave more than this many times the noise
+    /// (held out); 0 searches always (slower, sometimes a closer fit, same names so far).
+    #[arg(long, default_value_t = 2.0)]
+    pub structure_search_ratio: f64,
     /// OCM parameter set of the axial, bending and pose baselines: `table-3.1` (default, the
     /// dissertation's table) or `calibrated` (the virtual lab's plant and the LUT).
     #[arg(long, value_enum, default_value_t = crate::cmd_lut::Params::Table31)]
@@ -226,6 +231,12 @@ pub fn run(args: IdentArgs) -> anyhow::Result<()> {
     if !(args.alpha > 0.0 && args.alpha < 1.0) {
         bail!("--alpha must be in (0, 1), got {}", args.alpha);
     }
+    if !args.structure_search_ratio.is_finite() || args.structure_search_ratio < 0.0 {
+        bail!(
+            "--structure-search-ratio must be a non-negative number, got {}",
+            args.structure_search_ratio
+        );
+    }
     if !args.min_gain.is_finite() || args.min_gain < 0.0 {
         bail!(
             "--min-gain must be a non-negative percentage, got {}",
@@ -248,6 +259,7 @@ pub fn run(args: IdentArgs) -> anyhow::Result<()> {
     let cfg = Config {
         alpha: args.alpha,
         min_gain_pct: args.min_gain,
+        structure_search_ratio: args.structure_search_ratio,
         series_model,
         ocm: args.params.into(),
         ..Config::default()

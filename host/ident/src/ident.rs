@@ -153,8 +153,16 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         Baseline::StateSpace(ss) => ss.entry_lag_candidates(),
         _ => Vec::new(),
     };
-    let (baseline, prep, sel) = lower_orders(rec, &test, cfg, baseline, prep, sel);
-    let (baseline, prep, sel) = entry_lags(rec, &test, cfg, &lags, baseline, prep, sel);
+    // decided once, on the first selection: a lower order that brings the residual near the
+    // noise still leaves the force's entry to search (the chamber's records need both)
+    let room = select::heldout_rmse(&prep, &sel.extended.pred)
+        > cfg.structure_search_ratio * prep.noise_rmse();
+    let (baseline, prep, sel) = if room {
+        let (baseline, prep, sel) = lower_orders(rec, &test, cfg, baseline, prep, sel);
+        entry_lags(rec, &test, cfg, &lags, baseline, prep, sel)
+    } else {
+        (baseline, prep, sel)
+    };
     let baseline_rmse = select::heldout_rmse(&prep, &sel.baseline.pred);
     let extended_rmse = select::heldout_rmse(&prep, &sel.extended.pred);
     let gain_pct = if baseline_rmse > 0.0 {
@@ -535,8 +543,9 @@ fn lower_orders<'a>(
 /// each candidate lag (real poles of the baseline and of its lower orders,
 /// [`StateSpace::entry_lag_candidates`]), every candidate then compared with the same entry.
 /// A lag's model is kept when its training BIC (one parameter more) is the lowest, it loses no
-/// held-out accuracy, and the set named without the lag fits better with it. A record where
-/// nothing is named keeps the input's entry.
+/// held-out accuracy, and the set named without the lag fits better with it. That last rule is
+/// asked first, on a fit of the named set that starts cold, so a lag failing it costs one set
+/// fit instead of a selection. A record where nothing is named keeps the input's entry.
 fn entry_lags<'a>(
     rec: &'a Record,
     test: &[bool],
@@ -557,6 +566,12 @@ fn entry_lags<'a>(
     for &lag in lags {
         let b = Baseline::StateSpace(Box::new(ss.with_entry_lag(lag)));
         let pr = Prepared::new(rec, b.clone(), test.to_vec());
+        // rule 3 asked first, on a copy whose refinements start cold (the selection's own
+        // fits stay untouched): a lag that does not help the named set is not worth a
+        // selection, which costs some twenty set fits
+        if select::bic(&pr.clone().fit_set(&own), base + 1) >= own_c {
+            continue;
+        }
         let se = select::select(&pr, cfg);
         if se.causes.iter().all(|c| *c == Cause::None) {
             continue;

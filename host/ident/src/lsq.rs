@@ -27,6 +27,10 @@ pub struct LsqFit {
 /// Largest ratio of one term's RMS to the target's RMS before a fit counts as ill-conditioned.
 pub const CANCELLATION: f64 = 1e4;
 
+/// Rows times squared columns from which a fit's Gram matrix is computed on the thread pool
+/// (some 10 ms of work on one core).
+const PARALLEL_MIN_WORK: usize = 20_000_000;
+
 /// Fits `target ~ sum coef_j * columns[j]` on the rows where `mask` is true.
 /// Columns listed in `nonneg` are constrained to be >= 0 (active-set elimination).
 pub fn fit(columns: &[&[f64]], target: &[f64], mask: &[bool], nonneg: &[bool]) -> LsqFit {
@@ -38,10 +42,16 @@ pub fn fit(columns: &[&[f64]], target: &[f64], mask: &[bool], nonneg: &[bool]) -
     // with hundreds of columns); every sum still runs over the rows in order, so the result is
     // bit for bit the plain loop's (the selection's refinements end in other local optima with
     // rounding-level changes, see the README).
-    let gathered: Vec<Vec<f64>> = columns
-        .par_iter()
-        .map(|col| rows.iter().map(|&i| col[i]).collect())
-        .collect();
+    // Threads pay only on large fits: on the batteries' 2000-row records a fit takes well
+    // under a millisecond, and the pool's idle threads spinning between thousands of such fits
+    // cost more system time than the fits themselves (perf: 40 % of a battery in the scheduler)
+    let parallel = n * p * p >= PARALLEL_MIN_WORK;
+    let gather = |col: &&[f64]| -> Vec<f64> { rows.iter().map(|&i| col[i]).collect() };
+    let gathered: Vec<Vec<f64>> = if parallel {
+        columns.par_iter().map(gather).collect()
+    } else {
+        columns.iter().map(gather).collect()
+    };
     let t: Vec<f64> = rows.iter().map(|&i| target[i]).collect();
     let dot = |x: &[f64], y: &[f64]| -> f64 {
         let mut s = 0.0;
@@ -54,38 +64,40 @@ pub fn fit(columns: &[&[f64]], target: &[f64], mask: &[bool], nonneg: &[bool]) -
     // Row a of the Gram matrix's upper triangle and b[a]: independent of the other rows, so
     // the rows are computed in parallel (large records: a 100k-row fit spends most of its time
     // here) and land in their places.
-    let upper: Vec<(f64, Vec<f64>)> = (0..p)
-        .into_par_iter()
-        .map(|a| {
-            let xa = &gathered[a];
-            let mut row = Vec::with_capacity(p - a);
-            // Four products at a time: each still sums its rows in order (bit for bit the
-            // plain loop), but four independent sums keep the floating-point adder busy, where
-            // one sum waits on its own last addition.
-            let mut c = a;
-            while c + 4 <= p {
-                let (y0, y1, y2, y3) = (
-                    &gathered[c],
-                    &gathered[c + 1],
-                    &gathered[c + 2],
-                    &gathered[c + 3],
-                );
-                let (mut s0, mut s1, mut s2, mut s3) = (0.0, 0.0, 0.0, 0.0);
-                for ((((x, v0), v1), v2), v3) in xa.iter().zip(y0).zip(y1).zip(y2).zip(y3) {
-                    s0 += x * v0;
-                    s1 += x * v1;
-                    s2 += x * v2;
-                    s3 += x * v3;
-                }
-                row.extend([s0, s1, s2, s3]);
-                c += 4;
+    let gram_row = |a: usize| -> (f64, Vec<f64>) {
+        let xa = &gathered[a];
+        let mut row = Vec::with_capacity(p - a);
+        // Four products at a time: each still sums its rows in order (bit for bit the
+        // plain loop), but four independent sums keep the floating-point adder busy, where
+        // one sum waits on its own last addition.
+        let mut c = a;
+        while c + 4 <= p {
+            let (y0, y1, y2, y3) = (
+                &gathered[c],
+                &gathered[c + 1],
+                &gathered[c + 2],
+                &gathered[c + 3],
+            );
+            let (mut s0, mut s1, mut s2, mut s3) = (0.0, 0.0, 0.0, 0.0);
+            for ((((x, v0), v1), v2), v3) in xa.iter().zip(y0).zip(y1).zip(y2).zip(y3) {
+                s0 += x * v0;
+                s1 += x * v1;
+                s2 += x * v2;
+                s3 += x * v3;
             }
-            for y in &gathered[c..p] {
-                row.push(dot(xa, y));
-            }
-            (dot(xa, &t), row)
-        })
-        .collect();
+            row.extend([s0, s1, s2, s3]);
+            c += 4;
+        }
+        for y in &gathered[c..p] {
+            row.push(dot(xa, y));
+        }
+        (dot(xa, &t), row)
+    };
+    let upper: Vec<(f64, Vec<f64>)> = if parallel {
+        (0..p).into_par_iter().map(gram_row).collect()
+    } else {
+        (0..p).map(gram_row).collect()
+    };
     let mut g = DMatrix::<f64>::zeros(p, p);
     let mut b = DVector::<f64>::zeros(p);
     for (a, (ba, row)) in upper.into_iter().enumerate() {

@@ -72,6 +72,12 @@ pub struct Config {
     /// OCM parameter set of the energy-model baselines (`axial`, `bending`, `pose`): Table 3.1
     /// by default; `Calibrated` for the virtual lab's plant and the LUT.
     pub ocm: ParamPreset,
+    /// Once a cause is named on a state-space baseline, its structure (lower orders, where the
+    /// extensions' forces enter) is searched only when the named set leaves more than this
+    /// many times the estimated noise on held-out rows: nearer the noise the searches (up to
+    /// five more selections) have never changed a name in the batteries, only the fit. 0
+    /// searches always.
+    pub structure_search_ratio: f64,
 }
 
 impl Default for Config {
@@ -88,6 +94,7 @@ impl Default for Config {
             series_model: SeriesModel::Static,
             dynamic_reference: true,
             ocm: ParamPreset::Table31,
+            structure_search_ratio: 2.0,
         }
     }
 }
