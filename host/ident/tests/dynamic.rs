@@ -302,6 +302,16 @@ fn the_structure_searches_wait_for_a_residual_above_the_noise() {
         r.baseline
     );
     assert!(
+        r.baseline.contains("structure searches were skipped"),
+        "the report should say so: {}",
+        r.baseline
+    );
+    assert!(
+        !searched.1.baseline.contains("skipped"),
+        "{}",
+        searched.1.baseline
+    );
+    assert!(
         r.gain_pct < searched.1.gain_pct - 10.0,
         "unsearched {:.1} % against searched {:.1} %",
         r.gain_pct,
