@@ -37,6 +37,10 @@ impl KindArg {
 /// Baseline of `series` records without `sim_` columns.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SeriesBaseline {
+    /// The state-space model, or the static map where the static map with the causes it
+    /// names fits better (training BIC counting each baseline's parameters, no held-out
+    /// accuracy lost): a static system's loops are otherwise taken for dynamics.
+    Auto,
     /// Linear state-space model (subspace identification refined on free-run simulation
     /// error, order by BIC; once a cause is named, up to two lower orders are tried with the
     /// extensions): for dynamic systems; the static map is reported beside it.
@@ -134,9 +138,9 @@ pub struct IdentArgs {
     /// Record kind (a `.mat` file is always series).
     #[arg(long, value_enum, default_value_t = KindArg::Series)]
     pub kind: KindArg,
-    /// Baseline of a `series` record without sim_ columns [default: state-space; static for
-    /// the soft-arm .mat file, whose published figures are quasi-static: pass `state-space`
-    /// to judge it against the linear-dynamic baseline].
+    /// Baseline of a `series` record without sim_ columns [default: auto; static for the
+    /// soft-arm .mat file, whose published figures are quasi-static: pass `state-space` to
+    /// judge it against the linear-dynamic baseline].
     #[arg(long, value_enum)]
     pub baseline: Option<SeriesBaseline>,
     /// Print the JSON report instead of the text summary.
@@ -251,10 +255,11 @@ pub fn run(args: IdentArgs) -> anyhow::Result<()> {
     let series_model = match args.baseline {
         Some(SeriesBaseline::StateSpace) => SeriesModel::StateSpace,
         Some(SeriesBaseline::Static) => SeriesModel::Static,
+        Some(SeriesBaseline::Auto) => SeriesModel::Auto,
         // the soft arm is read as quasi-static unless asked, its published figures are on
         // that baseline
         None if is_mat => SeriesModel::Static,
-        None => SeriesModel::StateSpace,
+        None => SeriesModel::Auto,
     };
     let cfg = Config {
         alpha: args.alpha,

@@ -349,17 +349,24 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 println!("{}", serde_json::to_string_pretty(&summary)?);
             } else {
                 println!(
-                    "{}: {} steps to {:.3} mm on {} ({} nodes): F_z {:.4} N, mask {:.3} mm^2 at ({:.3}, {:.3}) mm, axis {:.3} rad; {} Newton iterations, max penetration {:.3} um (tol {:.3}); {:.2} s/step; files in {}",
+                    "{}: {} steps to {:.3} mm on {} ({} nodes): F_z {:.4} N, {}; {} Newton iterations, max penetration {:.3} um (tol {:.3}); {:.2} s/step; files in {}",
                     s.name,
                     steps,
                     last.depth_mm,
                     mesh_file,
                     gel.num_nodes(),
                     last.force_n[2],
-                    last.mask.area_m2 * 1e6,
-                    last.mask.centroid_m[0] * 1e3,
-                    last.mask.centroid_m[1] * 1e3,
-                    last.mask.angle_rad,
+                    if last.mask.area_m2 > 0.0 {
+                        format!(
+                            "mask {:.3} mm^2 at ({:.3}, {:.3}) mm, axis {:.3} rad",
+                            last.mask.area_m2 * 1e6,
+                            last.mask.centroid_m[0] * 1e3,
+                            last.mask.centroid_m[1] * 1e3,
+                            last.mask.angle_rad
+                        )
+                    } else {
+                        "mask empty (no top-face point pressed beyond the 30 um threshold)".into()
+                    },
                     iters,
                     max_pen * 1e6,
                     opts.contact.penetration_tol_m * 1e6,
@@ -1295,6 +1302,12 @@ fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
     use ocm_tactile::reduced::{
         FemSequence, ReducedModel, ReducedOptions, score_sequence, worst_frame,
     };
+    if !(a.penalty_scale.is_finite() && a.penalty_scale > 0.0) {
+        bail!(
+            "--penalty-scale must be a positive number, got {}",
+            a.penalty_scale
+        );
+    }
     let digit = ocm_datadir::data_file(a.data.as_deref(), "digit")?;
     let mesh_file = mesh_file(a.mesh);
     let gel = Gel::digit(digit.join(mesh_file), GelMaterial::default())?;

@@ -81,6 +81,9 @@ pub enum SeriesModel {
     Static,
     /// Linear state-space model (dynamic systems).
     StateSpace,
+    /// The state-space model, or the static map where the static map with the causes it
+    /// names fits better (`ocm ident`'s default; the rule is `structure::static_map`'s).
+    Auto,
 }
 
 impl Baseline {
@@ -122,7 +125,7 @@ impl Baseline {
                 stiffness_scale: fit_pose_scale(rec, physics, train),
             }),
             Kind::Series if !rec.simulated.is_empty() => Ok(Baseline::Simulator),
-            Kind::Series if series == SeriesModel::StateSpace => {
+            Kind::Series if matches!(series, SeriesModel::StateSpace | SeriesModel::Auto) => {
                 Ok(Baseline::state_space(rec, train))
             }
             Kind::Series => Ok(Baseline::Series),

@@ -2,16 +2,16 @@
 
 use serde::Serialize;
 
-use crate::baseline::Baseline;
+use crate::baseline::{Baseline, SeriesModel};
 use crate::cause::Cause;
+use crate::conventions::{conventions, schema_warnings};
 use crate::data::{Kind, Record};
 use crate::diagnostics::{self, Diagnostic, Hotspot};
 use crate::error::IdentError;
-use crate::extension::{Prepared, SetFit};
+use crate::extension::Prepared;
 use crate::select::{self, Candidate, Config};
-use crate::signal;
 use crate::split;
-use crate::statespace::StateSpace;
+use crate::structure::{entry_lags, lower_orders, searched, static_map};
 
 /// A fitted parameter with its standard error.
 #[derive(Debug, Clone, Serialize)]
@@ -113,22 +113,23 @@ pub struct Identification {
 /// Held-out RMSE over noise RMS above which a residual is never "consistent with noise".
 pub const UNEXPLAINED_RATIO: f64 = 3.0;
 
-/// The schema's conventions for a kind, printed in reports and in the CLI help.
-pub fn conventions(kind: Kind) -> &'static str {
-    match kind {
-        Kind::Axial => {
-            "axial: force_n is the axial force on the OCM, tension positive; strain is elongation over rest length (extension positive); pressure_kpa is gauge pressure (inflation positive)"
-        }
-        Kind::Bending => {
-            "bending: strain0 is the initial axial strain set by pressure; bend_angle_rad and moment_nm share their sign (the moment that bends the OCM by a positive angle is positive)"
-        }
-        Kind::Pose => {
-            "pose: tip x_mm, y_mm, z_mm in the base frame of a standing segment, z along the unbent backbone pointing from base to tip (z > 0); load_n is axial tension on the segment; p1..p3_kpa gauge pressures of chambers at 90, 210 and 330 degrees from x (inflation positive). A hanging mount must be rotated into this frame first"
-        }
-        Kind::Series => {
-            "series: u_<name> inputs, y_<name> measured outputs, optional sim_<name> (a simulator's prediction of y_<name>) and x_<name> (its states; where they determine the simulated output, memory, offsets and gains also act on them, a gain about the state's zero, so log states whose zero is the unloaded configuration, e.g. an elongation rather than a length); values in the file's units, named by the suffix (_n, _m, _mm, _kpa, _pa, _rad, _s); a time that goes backwards starts a new trial"
-        }
-    }
+/// Held-out RMSE over the output's spread (standard deviation) at or below which the baseline reproduces
+/// the record to numerical precision (a least-squares solve in double precision lands near
+/// 1e-11 on a noise-free affine record; a measurement's noise is many orders above).
+pub const EXACT_FIT: f64 = 1e-8;
+
+/// The measured outputs' standard deviation over all rows, pooled over channels (RMS).
+fn output_spread(prep: &Prepared) -> f64 {
+    let per: Vec<f64> = prep
+        .channels
+        .iter()
+        .map(|ch| {
+            let n = ch.y.len().max(1) as f64;
+            let mean = ch.y.iter().sum::<f64>() / n;
+            ch.y.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n
+        })
+        .collect();
+    (per.iter().sum::<f64>() / per.len().max(1) as f64).sqrt()
 }
 
 /// Identifies what the baseline gets wrong in `rec`.
@@ -164,13 +165,32 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
             cfg.structure_search_ratio
         )
     });
+    let unnamed = sel.causes.iter().all(|c| *c == Cause::None);
     let (baseline, prep, sel) = if room {
         let (baseline, prep, sel) = lower_orders(rec, &test, cfg, baseline, prep, sel);
         entry_lags(rec, &test, cfg, &lags, baseline, prep, sel)
     } else {
         (baseline, prep, sel)
     };
+    // a static map is cheap to try: where nothing is named it always is, otherwise only where
+    // the structure searches were worth their cost
+    let (baseline, prep, sel, chosen) =
+        if cfg.series_model == SeriesModel::Auto && (unnamed || room) {
+            static_map(rec, &test, cfg, baseline, prep, sel)
+        } else {
+            (baseline, prep, sel, None)
+        };
     let baseline_rmse = select::heldout_rmse(&prep, &sel.baseline.pred);
+    // a baseline that reproduces the record to rounding leaves nothing for a cause to explain:
+    // the extensions would fit the least-squares solve's last digits (a noise-free affine
+    // record named `gain`, its rounding-level residual 1000x the rounding-level noise)
+    let spread = output_spread(&prep);
+    let exact = baseline_rmse <= EXACT_FIT * spread;
+    let mut sel = sel;
+    if exact {
+        sel.causes = vec![Cause::None];
+        sel.extended = sel.baseline.clone();
+    }
     let extended_rmse = select::heldout_rmse(&prep, &sel.extended.pred);
     let gain_pct = if baseline_rmse > 0.0 {
         100.0 * (1.0 - extended_rmse / baseline_rmse)
@@ -338,7 +358,16 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         ));
     }
     let verdict = if causes == [Cause::None] {
-        if ratio(baseline_rmse) > UNEXPLAINED_RATIO {
+        if exact {
+            format!(
+                "none: the baseline reproduces the record to numerical precision (held-out RMSE {baseline_rmse:.4e} {unit}, {:.1e} of the output's spread {spread:.4e} {unit}, at most {EXACT_FIT:.0e} counts as exact); no cause is named on a rounding-level residual",
+                if spread > 0.0 {
+                    baseline_rmse / spread
+                } else {
+                    0.0
+                }
+            )
+        } else if ratio(baseline_rmse) > UNEXPLAINED_RATIO {
             causes = vec![Cause::Unexplained];
             format!(
                 "the model is wrong and the discrepancy is unexplained: held-out RMSE {baseline_rmse:.4e} {unit} is {:.1}x the noise ({noise_rmse:.2e} {unit}) and no candidate explains it; {where_}",
@@ -381,7 +410,10 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         unit,
         rows: [rec.len(), rec.len() - n_test, n_test],
         split: split::describe(rec),
-        baseline: baseline.describe() + skipped.as_deref().unwrap_or(""),
+        baseline: match chosen {
+            Some(why) => baseline.describe() + &why,
+            None => baseline.describe() + skipped.as_deref().unwrap_or(""),
+        },
         baseline_params,
         dynamic_baseline_rmse,
         extensions: named
@@ -431,194 +463,3 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
         plot_channel,
     })
 }
-
-/// Checks a record against its kind's conventions; each finding is a warning.
-fn schema_warnings(rec: &Record, prep: &Prepared) -> Vec<String> {
-    let mut w = Vec::new();
-    // A fitted model that anti-correlates with the measurement in a channel says the record's
-    // frame or sign differs from the schema's (a hanging mount, a flipped axis).
-    for (c, ch) in prep.channels.iter().enumerate() {
-        let r = signal::correlation(&ch.y, &ch.yhat);
-        if r < -0.2 {
-            w.push(format!(
-                "{}: the model's prediction anti-correlates with the measurement (r = {r:.2}): the record's sign or frame contradicts the schema ({})",
-                rec.outputs[c].name,
-                conventions(rec.kind)
-            ));
-        }
-    }
-    if rec.kind == Kind::Pose {
-        let z = &rec.outputs[2].values;
-        let neg = z.iter().filter(|v| **v < 0.0).count();
-        if neg * 2 > z.len() {
-            w.push(format!(
-                "z is negative on {neg} of {} rows: the schema's z points from base to tip of a standing segment (a hanging mount's log must be rotated first)",
-                z.len()
-            ));
-        }
-    }
-    // Pressures far outside the parameter set's range: the record is from another design (the
-    // lab's calibrated plant read with Table 3.1, say); the fit would be a stretched reading.
-    if let crate::baseline::Baseline::Pose {
-        physics,
-        stiffness_scale,
-    } = &prep.baseline
-    {
-        let (lo, hi) = physics.pressure_range_pa();
-        let (lo, hi) = (lo * stiffness_scale, hi * stiffness_scale);
-        let total = 3 * rec.len();
-        let out = rec.inputs[..3]
-            .iter()
-            .flat_map(|ch| &ch.values)
-            .filter(|p| **p < lo || **p > hi)
-            .count();
-        if out * 2 > total {
-            w.push(format!(
-                "{out} of {total} chamber pressures lie outside {:.1}..{:.1} kPa, the working range of the {} parameter set at the fitted stiffness scale {stiffness_scale:.3}: the record may come from another design (the virtual lab's plant is `--params calibrated`)",
-                lo / 1e3,
-                hi / 1e3,
-                physics.params_label()
-            ));
-        }
-    }
-    for (o, s) in rec.outputs.iter().zip(&rec.simulated) {
-        if o.values == s.values {
-            w.push(format!(
-                "y_{0} equals sim_{0} on every row: the measured column may be a copy of the simulated one",
-                o.name
-            ));
-        }
-    }
-    w
-}
-
-/// Where a state-space baseline's extensions name a cause, the selection is run again on the
-/// baselines of up to [`LOWER_ORDERS`] lower orders, and the extended model of the lowest
-/// training criterion (BIC with the baseline's and the extensions' parameters together) is
-/// kept. The baseline's order is chosen on data that contain the effects, and the extra
-/// states absorb part of them: every pair record of seed 5000 chose the largest order (5),
-/// against 2, 4 and 3 for the one-mass, two-mass and chamber plants, and at their own orders
-/// the chamber's friction+stiffening and hysteresis+stiffening pairs are named exactly (87.8
-/// and 93.9 %), at order 5 neither. A record where nothing is named keeps its order (no
-/// false alarm can come from here).
-fn lower_orders<'a>(
-    rec: &'a Record,
-    test: &[bool],
-    cfg: &Config,
-    baseline: Baseline,
-    prep: Prepared<'a>,
-    sel: select::Selection,
-) -> (Baseline, Prepared<'a>, select::Selection) {
-    let Some((ss, _)) = searched(rec, &baseline, &sel) else {
-        return (baseline, prep, sel);
-    };
-    let n = ss.order();
-    let m = rec.inputs.len();
-    let p = rec.outputs.len();
-    // the baseline's parameters count too: the sets compared have different baselines
-    let criterion =
-        |order: usize, f: &SetFit| select::bic(f, order * (order + m) + p * (order + m + 1));
-    let mut best_c = criterion(n, &sel.extended);
-    let mut best = (baseline.clone(), prep, sel);
-    for order in (n.saturating_sub(LOWER_ORDERS).max(1)..n).rev() {
-        let Some(alt) = ss.at_lower_order(order) else {
-            continue;
-        };
-        let b = Baseline::StateSpace(Box::new(alt));
-        let pr = Prepared::new(rec, b.clone(), test.to_vec());
-        let se = select::select(&pr, cfg);
-        if se.causes.iter().all(|c| *c == Cause::None) {
-            continue;
-        }
-        let c = criterion(order, &se.extended);
-        if c < best_c {
-            best_c = c;
-            best = (b, pr, se);
-        }
-    }
-    best
-}
-
-/// Where the extensions' forces enter a state-space baseline, chosen once a cause is named.
-/// By default a force enters where the input does (`B`). Where the input reaches the
-/// structure through an actuator's lag (a chamber filled through a restriction), friction,
-/// a hysteretic loop or a stiffening acts on the structure itself: entering along `B` they
-/// are low-pass filtered by the filling and their reversals come late (chamber pairs gained
-/// 16-60 % with both effects at 5-50 times the noise). A lag freed in every candidate's
-/// refinement blurred friction against hysteresis (README), so here it is a property of the
-/// baseline, like its order: the whole selection runs again with the force entering after
-/// each candidate lag (real poles of the baseline and of its lower orders,
-/// [`StateSpace::entry_lag_candidates`]), every candidate then compared with the same entry.
-/// A lag's model is kept when its training BIC (one parameter more) is the lowest, it loses no
-/// held-out accuracy, and the set named without the lag fits better with it. That last rule is
-/// asked first, on a fit of the named set that starts cold, so a lag failing it costs one set
-/// fit instead of a selection. A record where nothing is named keeps the input's entry.
-fn entry_lags<'a>(
-    rec: &'a Record,
-    test: &[bool],
-    cfg: &Config,
-    lags: &[f64],
-    baseline: Baseline,
-    prep: Prepared<'a>,
-    sel: select::Selection,
-) -> (Baseline, Prepared<'a>, select::Selection) {
-    let Some((ss, base)) = searched(rec, &baseline, &sel) else {
-        return (baseline, prep, sel);
-    };
-    let mut best_c = select::bic(&sel.extended, base);
-    let own = sel.causes.clone();
-    let own_c = best_c;
-    let mut best_h = select::heldout_rmse(&prep, &sel.extended.pred);
-    let mut best = (baseline.clone(), prep, sel);
-    for &lag in lags {
-        let b = Baseline::StateSpace(Box::new(ss.with_entry_lag(lag)));
-        let pr = Prepared::new(rec, b.clone(), test.to_vec());
-        // rule 3 asked first, on a copy whose refinements start cold (the selection's own
-        // fits stay untouched): a lag that does not help the named set is not worth a
-        // selection, which costs some twenty set fits
-        if select::bic(&pr.clone().fit_set(&own), base + 1) >= own_c {
-            continue;
-        }
-        let se = select::select(&pr, cfg);
-        if se.causes.iter().all(|c| *c == Cause::None) {
-            continue;
-        }
-        let c = select::bic(&se.extended, base + 1);
-        // as for the selection's swaps, a better training criterion is no licence to lose
-        // held-out accuracy
-        let h = select::heldout_rmse(&pr, &se.extended.pred);
-        // the lag must be a property of the record, not a licence for another set: the
-        // set named without it must fit better with it
-        let same = if se.causes.len() == own.len() && own.iter().all(|k| se.causes.contains(k)) {
-            c
-        } else {
-            select::bic(&pr.fit_set(&own), base + 1)
-        };
-        if same < own_c && c < best_c && h <= (1.0 + cfg.min_gain_pct / 100.0) * best_h {
-            best_c = c;
-            best_h = h;
-            best = (b, pr, se);
-        }
-    }
-    best
-}
-
-/// The state-space baseline and its parameter count `n (n + m) + p (n + m + 1)` when a cause
-/// is named on it: the structure searches ([`lower_orders`], [`entry_lags`]) run only then.
-fn searched<'b>(
-    rec: &Record,
-    baseline: &'b Baseline,
-    sel: &select::Selection,
-) -> Option<(&'b StateSpace, usize)> {
-    let Baseline::StateSpace(ss) = baseline else {
-        return None;
-    };
-    if sel.causes.iter().all(|c| *c == Cause::None) {
-        return None;
-    }
-    let (n, m, p) = (ss.order(), rec.inputs.len(), rec.outputs.len());
-    Some((ss, n * (n + m) + p * (n + m + 1)))
-}
-
-/// Lower baseline orders tried once a cause is named (see [`lower_orders`]).
-const LOWER_ORDERS: usize = 2;

@@ -15,6 +15,7 @@
 
 pub mod baseline;
 pub mod cause;
+pub mod conventions;
 pub mod cylinder;
 pub mod data;
 pub mod diagnostics;
@@ -37,6 +38,7 @@ pub mod signal;
 pub mod softarm;
 pub mod split;
 pub mod statespace;
+mod structure;
 pub mod synth;
 
 pub use cause::Cause;

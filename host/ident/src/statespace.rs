@@ -96,6 +96,8 @@ impl StateSpace {
     pub fn entry_lag_candidates(&self) -> Vec<f64> {
         let mut lags: Vec<f64> = std::iter::once(&self.a)
             .chain(self.lower.iter().map(|(a, _)| a))
+            // nalgebra's Schur form indexes out of bounds on an empty matrix (order 0)
+            .filter(|a| a.nrows() > 0)
             .flat_map(|a| a.complex_eigenvalues().iter().copied().collect::<Vec<_>>())
             .filter(|e| e.im.abs() < 1e-9 * e.re.abs().max(1.0) && e.re > 0.0 && e.re < 1.0)
             .map(|e| 1.0 / (1.0 - e.re))

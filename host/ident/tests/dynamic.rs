@@ -1,5 +1,6 @@
-//! Hidden effects inside the dynamics of oscillators, identified on the linear state-space
-//! baseline (free-run predictions). `OCM_DYN_SEEDS` sets the seeds per case (default 3),
+//! Hidden effects inside the dynamics of oscillators, identified as `ocm ident` does by default
+//! (`SeriesModel::Auto`: the linear state-space baseline with free-run predictions, or the
+//! static map where that fits better, which no record of these dynamic systems may choose). `OCM_DYN_SEEDS` sets the seeds per case (default 3),
 //! `OCM_DYN_SEED0` the first seed (default 1000), `OCM_DYN_SYSTEMS` the systems (a
 //! comma-separated subset of `oscillator1,oscillator2,chamber`, default all three).
 
@@ -10,8 +11,8 @@ use ocm_ident::baseline::SeriesModel;
 use ocm_ident::dynamic_generator::{DynGenerated, DynSpec, EFFECTS, System, generate};
 use ocm_ident::{Cause, Config, Report, identify};
 
-/// A record of `effects` on `system` (2000 rows), generated and identified on the state-space
-/// baseline once per test binary: the battery, the pairs and the focused tests below share
+/// A record of `effects` on `system` (2000 rows), generated and identified with the CLI's
+/// default baseline once per test binary: the battery, the pairs and the focused tests below share
 /// records (the chamber cubic of seed 1001, the one-mass hysteresis+friction of seed 5000),
 /// and each costs seconds. A test that asks for a record another is identifying waits for it.
 fn identified(system: System, effects: &[Cause], seed: u64) -> Arc<(DynGenerated, Report)> {
@@ -32,7 +33,7 @@ fn identified(system: System, effects: &[Cause], seed: u64) -> Arc<(DynGenerated
             rows: 2000,
         });
         let cfg = Config {
-            series_model: SeriesModel::StateSpace,
+            series_model: SeriesModel::Auto,
             ..Config::default()
         };
         let r = identify(&g.record, &cfg).unwrap().report;
@@ -82,7 +83,7 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
         })
         .collect();
     // two workers (the records are independent): half the wall-clock time on two cores
-    let outcomes: Vec<(Cause, bool)> = std::thread::scope(|scope| {
+    let outcomes: Vec<(Cause, bool, bool)> = std::thread::scope(|scope| {
         let workers: Vec<_> = (0..2)
             .map(|w| {
                 let cases = &cases;
@@ -95,10 +96,12 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
                             let memo = identified(system, &[effect], seed0 + seed);
                             let (g, r) = &*memo;
                             let ok = r.causes == [effect];
+                            let stat = is_static(r);
                             eprintln!(
-                                "{system:?} {effect} seed {seed}: named {:?} ({}), ratio {:.1}, gain {:.1} %, {}",
+                                "{system:?} {effect} seed {seed}: named {:?} ({}{}), ratio {:.1}, gain {:.1} %, {}",
                                 r.causes,
                                 if ok { "ok" } else { "MISS" },
+                                if stat { ", STATIC MAP" } else { "" },
                                 g.ratio,
                                 r.gain_pct,
                                 g.details
@@ -112,7 +115,7 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
                                     ocm_ident::select::evidence(&r.additions)
                                 );
                             }
-                            (effect, ok)
+                            (effect, ok, stat)
                         })
                         .collect::<Vec<_>>()
                 })
@@ -126,7 +129,8 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
     let mut correct = 0;
     let mut total = 0;
     let mut false_alarms = 0;
-    for (effect, ok) in outcomes {
+    let statics = outcomes.iter().filter(|o| o.2).count();
+    for (effect, ok, _) in outcomes {
         if effect == Cause::None {
             false_alarms += usize::from(!ok);
         } else {
@@ -139,6 +143,10 @@ fn dynamic_battery_names_the_hidden_effect_and_nothing_on_clean_records() {
     // (103 of 108), no false alarm on 9 clean records each (README, "Test time and the
     // structure searches' cost")
     assert!(total > 0);
+    assert_eq!(
+        statics, 0,
+        "{statics} records of dynamic systems took the static map"
+    );
     assert_eq!(false_alarms, 0, "{false_alarms} false alarms");
     assert!(correct * 100 >= 95 * total, "{correct} / {total}");
 }
@@ -164,7 +172,7 @@ fn dynamic_pairs_name_both_effects() {
                 .flat_map(move |pair| (0..seeds).map(move |s| (system, pair, seed0 + s)))
         })
         .collect();
-    let outcomes: Vec<(bool, bool, bool)> = std::thread::scope(|scope| {
+    let outcomes: Vec<(bool, bool, bool, bool)> = std::thread::scope(|scope| {
         let workers: Vec<_> = (0..2)
             .map(|w| {
                 let cases = &cases;
@@ -180,8 +188,9 @@ fn dynamic_pairs_name_both_effects() {
                             let counts = g.ratios.iter().all(|r| *r >= 3.0);
                             let exact = named.len() == 2 && pair.iter().all(|c| named.contains(c));
                             let one = pair.iter().any(|c| named.contains(c));
+                            let stat = is_static(r);
                             eprintln!(
-                                "{system:?} {}+{} seed {seed}: named {named:?} ({}), ratios {:.1?}, gain {:.1} %, {}",
+                                "{system:?} {}+{} seed {seed}: named {named:?} ({}{}), ratios {:.1?}, gain {:.1} %, {}",
                                 pair[0],
                                 pair[1],
                                 if !counts {
@@ -191,6 +200,7 @@ fn dynamic_pairs_name_both_effects() {
                                 } else {
                                     "MISS"
                                 },
+                                if stat { ", STATIC MAP" } else { "" },
                                 g.ratios,
                                 r.gain_pct,
                                 g.details
@@ -202,7 +212,7 @@ fn dynamic_pairs_name_both_effects() {
                                 ocm_ident::select::evidence(&r.candidates),
                                 ocm_ident::select::evidence(&r.additions)
                             );
-                            (counts, exact, one)
+                            (counts, exact, one, stat)
                         })
                         .collect::<Vec<_>>()
                 })
@@ -218,12 +228,22 @@ fn dynamic_pairs_name_both_effects() {
     let neither = outcomes.iter().filter(|o| o.0 && !o.2).count();
     eprintln!("dynamic pairs: {exact} / {counted} exact, {neither} with neither effect named");
     assert!(counted > 0);
+    let statics = outcomes.iter().filter(|o| o.3).count();
+    assert_eq!(
+        statics, 0,
+        "{statics} records of dynamic systems took the static map"
+    );
     // every counted record names at least one of its two effects
     assert_eq!(neither, 0, "{neither} records name neither effect");
     assert!(
         exact * 100 >= PAIR_FLOOR_PCT * counted,
         "{exact} / {counted}"
     );
+}
+
+/// Whether the report's baseline is the static map ([`SeriesModel::Auto`] chose it).
+fn is_static(r: &Report) -> bool {
+    r.baseline.starts_with("static affine map")
 }
 
 /// The pairs of the dynamic battery.

@@ -43,6 +43,30 @@ impl ContactParams {
             max_updates: 12,
         }
     }
+
+    /// Checks that every parameter is usable: finite positive penalties and tolerance, a
+    /// finite non-negative friction coefficient.
+    pub fn validate(&self) -> crate::Result<()> {
+        let positive = [
+            ("normal penalty", self.normal_penalty_pa_m, "Pa/m"),
+            ("tangential penalty", self.tangential_penalty_pa_m, "Pa/m"),
+            ("penetration tolerance", self.penetration_tol_m, "m"),
+        ];
+        for (name, v, unit) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(crate::TactileError::Input(format!(
+                    "the contact's {name} must be a positive number, got {v} {unit}"
+                )));
+            }
+        }
+        if !(self.friction.is_finite() && self.friction >= 0.0) {
+            return Err(crate::TactileError::Input(format!(
+                "the Coulomb friction coefficient must be a finite number >= 0, got {}",
+                self.friction
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// Converged contact history of one surface node.

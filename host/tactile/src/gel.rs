@@ -28,6 +28,25 @@ impl Default for GelMaterial {
 }
 
 impl GelMaterial {
+    /// Checks the parameters a user gives: a finite positive Young's modulus and a Poisson's
+    /// ratio strictly inside (-1, 0.5) (0.5 is incompressible, which the bulk term of eq 5.6
+    /// cannot represent).
+    pub fn validate(&self) -> Result<()> {
+        if !(self.young_pa.is_finite() && self.young_pa > 0.0) {
+            return Err(TactileError::Input(format!(
+                "the gel's Young's modulus must be a positive number, got {} Pa",
+                self.young_pa
+            )));
+        }
+        if !(self.poisson > -1.0 && self.poisson < 0.5) {
+            return Err(TactileError::Input(format!(
+                "the gel's Poisson's ratio must lie strictly between -1 and 0.5, got {}",
+                self.poisson
+            )));
+        }
+        Ok(())
+    }
+
     /// The FEM law (eq 5.6).
     pub fn law(&self) -> Material {
         Material::neo_hookean_bulk(self.young_pa, self.poisson)
@@ -93,6 +112,7 @@ impl Gel {
         material: GelMaterial,
         constrain: impl Fn(&nalgebra::Vector3<f64>) -> [bool; 3],
     ) -> Result<Self> {
+        material.validate()?;
         mesh.orient_tets();
         mesh.triangles = ocm_fem::mesh::surface::boundary_faces(&mesh.points, &mesh.tets);
         let mut model = Model::new(&mesh, material.law(), DENSITY_KG_M3)?;

@@ -127,8 +127,25 @@ impl<'a> Indentation<'a> {
     ) -> Result<Self> {
         if !(options.step_m > 0.0 && options.step_m.is_finite()) || options.steps == 0 {
             return Err(TactileError::Input(format!(
-                "indentation needs at least one positive depth step (got {} x {} m)",
-                options.steps, options.step_m
+                "indentation needs at least one positive depth step (got {} steps of {} um)",
+                options.steps,
+                options.step_m * 1e6
+            )));
+        }
+        options.contact.validate()?;
+        // the base is held: a depth that reaches it would crush the gel onto a rigid plane
+        let base_z = (0..gel.num_nodes())
+            .filter(|&i| gel.model.fixed[3 * i + 2])
+            .map(|i| gel.model.rest[i].z)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let depth = options.steps as f64 * options.step_m;
+        if base_z.is_finite() && depth >= gel.z_top - base_z {
+            return Err(TactileError::Input(format!(
+                "{name}: the final depth {:.3} mm ({} steps of {} um) reaches the gel's held base: the top stands {:.3} mm above it",
+                depth * 1e3,
+                options.steps,
+                options.step_m * 1e6,
+                (gel.z_top - base_z) * 1e3
             )));
         }
         let approach = Approach::new(name, gel, indenter, placement)?;

@@ -117,3 +117,54 @@ fn bad_inputs_give_clear_errors() {
     assert!(e.to_string().contains("far") && e.to_string().contains("touches no"));
     std::fs::remove_dir_all(&tmp).ok();
 }
+
+/// Out-of-range numbers are refused with the parameter's name and value, before any solve:
+/// friction, penalties, the material and a depth that would reach the held base (these once ran:
+/// a friction of -1 or infinity changed the force, 2 steps of 1e9 um "converged" at 0 N).
+#[test]
+fn out_of_range_parameters_are_refused() {
+    let (Some(dir), Some(mesh)) = (digit_dir(), test_data("digit/DIGIT_remesh2.vtk")) else {
+        return;
+    };
+    let gel = Gel::digit(&mesh, GelMaterial::default()).unwrap();
+    let setups = digit_setups(&dir).unwrap();
+    let s = setups.iter().find(|s| s.name == "edge6").unwrap();
+    let ind = Indenter::from_stl(&s.stl).unwrap();
+    let refused = |o: IndentOptions| -> String {
+        Indentation::new(&s.name, &gel, &ind, s.placement, o)
+            .err()
+            .expect("refused")
+            .to_string()
+    };
+    let base = IndentOptions::protocol(gel.material.young_pa);
+    for f in [-1.0, f64::NAN, f64::INFINITY] {
+        let mut o = base;
+        o.contact.friction = f;
+        let e = refused(o);
+        assert!(e.contains("friction") && e.contains(&format!("{f}")), "{e}");
+    }
+    let mut o = base;
+    o.contact.normal_penalty_pa_m = 0.0;
+    assert!(refused(o).contains("normal penalty"));
+    let mut o = base;
+    o.contact.penetration_tol_m = f64::NAN;
+    assert!(refused(o).contains("penetration tolerance"));
+    let mut o = base;
+    o.steps = 2;
+    o.step_m = 1e3;
+    let e = refused(o);
+    assert!(e.contains("edge6") && e.contains("held base"), "{e}");
+    // the whole protocol (1 mm) stays well above the base
+    assert!(Indentation::new(&s.name, &gel, &ind, s.placement, base).is_ok());
+    for (young_pa, poisson, what) in [
+        (-5.0, 0.45, "Young's modulus"),
+        (f64::NAN, 0.45, "Young's modulus"),
+        (0.3e6, 0.5, "Poisson's ratio"),
+        (0.3e6, f64::NAN, "Poisson's ratio"),
+    ] {
+        let e = Gel::digit(&mesh, GelMaterial { young_pa, poisson })
+            .expect_err("refused")
+            .to_string();
+        assert!(e.contains(what), "{e}");
+    }
+}
