@@ -1154,8 +1154,8 @@ fn reduce_ecsw(
     folders: &[(String, PathBuf)],
     m: &ocm_tactile::reduced::ReducedModel,
     enrich: Option<ocm_tactile::reduced::Enrichment>,
-) -> anyhow::Result<(ocm_tactile::hyper::NonlinearGel, serde_json::Value)> {
-    use ocm_tactile::hyper::{EcswTraining, NonlinearGel, fit_ecsw};
+) -> anyhow::Result<(ocm_tactile::reduced::hyper::NonlinearGel, serde_json::Value)> {
+    use ocm_tactile::reduced::hyper::{EcswTraining, NonlinearGel, fit_ecsw};
     use ocm_tactile::reduced::{FemSequence, placement_model};
     let t0 = std::time::Instant::now();
     if let Some(path) = &a.ecsw {

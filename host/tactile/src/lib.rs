@@ -14,7 +14,6 @@ pub mod contact;
 pub mod dataset;
 pub mod error;
 pub mod gel;
-pub mod hyper;
 pub mod image_io;
 pub mod indent;
 pub mod indenter;

@@ -16,7 +16,8 @@
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
-use super::dynamic_features::{LoopSignal, restoring_sign};
+use super::dynamic_features::restoring_sign;
+use super::loop_signal::LoopSignal;
 use super::prepared::Prepared;
 use super::refined::{Cached, InLoopFit};
 use crate::cause::Cause;

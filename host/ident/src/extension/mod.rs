@@ -7,6 +7,7 @@ mod dynamic_features;
 mod features;
 mod in_loop;
 mod joint_fit;
+mod loop_signal;
 mod prepared;
 mod refined;
 

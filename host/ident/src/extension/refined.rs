@@ -1,7 +1,7 @@
 //! What an in-loop refinement produces, and the record of finished ones that the selection
 //! reuses: the data both the refinement and the prepared record hold, apart from the code.
 
-use super::dynamic_features::LoopSignal;
+use super::loop_signal::LoopSignal;
 use crate::cause::Cause;
 
 /// The result of an in-loop refinement of one output channel.

@@ -12,7 +12,8 @@
 //! force is exactly Phi^T f_int(Phi q).
 
 use crate::gel::Gel;
-use crate::reduced::ReducedModel;
+// the basis alone: the reduced solve uses this module (no circle)
+use super::basis::ReducedModel;
 use crate::{Result, TactileError};
 use nalgebra::{DMatrix, DVector, Vector3};
 use ocm_fem::element::{Mat12, TetGeom, evaluate};
