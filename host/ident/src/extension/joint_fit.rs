@@ -1,8 +1,8 @@
 //! Joint fit of the baseline's free coefficients and a set of extensions on the training
 //! rows; latency searches its dead time and lag around the linear fit.
 
-use super::loop_signal::LoopSignal;
 use super::features::Features;
+use super::loop_signal::LoopSignal;
 use super::prepared::{Prepared, channel_scale};
 use crate::baseline::Baseline;
 use crate::cause::Cause;
