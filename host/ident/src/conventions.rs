@@ -38,15 +38,15 @@ fn sampling_warning(rec: &Record) -> Option<String> {
         .filter(|i| !first.contains(i))
         .map(|i| t[i] - t[i - 1])
         .collect();
-    let mut sorted = steps.clone();
-    sorted.sort_by(f64::total_cmp);
-    // the median of the positive steps: repeated stamps are counted apart
-    let positive: Vec<f64> = sorted.iter().copied().filter(|d| *d > 0.0).collect();
-    let Some(&median) = positive.get(positive.len() / 2) else {
-        return (!steps.is_empty()).then(|| {
-            "every time stamp inside a trial repeats the one before: the record has no time step; the state-space model, the lag, latency and rate terms need one".to_string()
-        });
-    };
+    if steps.is_empty() {
+        return None;
+    }
+    if steps.iter().all(|d| *d <= 0.0) {
+        return Some("every time stamp inside a trial repeats the one before: the record has no time step; the state-space model, the lag, latency and rate terms need one".to_string());
+    }
+    // the median of the positive steps (a trial's reset goes backwards and is not one): repeated
+    // stamps are counted apart
+    let median = signal::median_dt(t);
     let off = steps
         .iter()
         .filter(|d| (**d - median).abs() > SAMPLING_TOLERANCE * median || **d <= 0.0)
@@ -55,12 +55,17 @@ fn sampling_warning(rec: &Record) -> Option<String> {
         return None;
     }
     let repeated = steps.iter().filter(|d| **d == 0.0).count();
+    let (lo, hi) = steps
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), d| {
+            (a.min(*d), b.max(*d))
+        });
     Some(format!(
         "the time step varies: {off} of {} steps inside trials differ from the median step {median:.4e} s by more than {:.0} % (from {:.4e} to {:.4e} s{}); the state-space model, the lag, latency and rate terms assume a constant step, so resample the record to one step first",
         steps.len(),
         100.0 * SAMPLING_TOLERANCE,
-        sorted[0],
-        sorted[sorted.len() - 1],
+        lo,
+        hi,
         if repeated > 0 {
             format!(", {repeated} repeated time stamps")
         } else {

@@ -123,11 +123,7 @@ fn output_spread(prep: &Prepared) -> f64 {
     let per: Vec<f64> = prep
         .channels
         .iter()
-        .map(|ch| {
-            let n = ch.y.len().max(1) as f64;
-            let mean = ch.y.iter().sum::<f64>() / n;
-            ch.y.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n
-        })
+        .map(|ch| crate::signal::mean_std(&ch.y).1.powi(2))
         .collect();
     (per.iter().sum::<f64>() / per.len().max(1) as f64).sqrt()
 }

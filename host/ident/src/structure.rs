@@ -33,8 +33,7 @@ pub(crate) fn lower_orders<'a>(
     let m = rec.inputs.len();
     let p = rec.outputs.len();
     // the baseline's parameters count too: the sets compared have different baselines
-    let criterion =
-        |order: usize, f: &SetFit| select::bic(f, order * (order + m) + p * (order + m + 1));
+    let criterion = |order: usize, f: &SetFit| select::bic(f, state_space_params(order, m, p));
     let mut best_c = criterion(n, &sel.extended);
     let mut best = (baseline.clone(), prep, sel);
     for order in (n.saturating_sub(LOWER_ORDERS).max(1)..n).rev() {
@@ -143,7 +142,7 @@ pub(crate) fn static_map<'a>(
         return (baseline, prep, sel, None);
     };
     let (n, m, p) = (ss.order(), rec.inputs.len(), rec.outputs.len());
-    let own = n * (n + m) + p * (n + m + 1) + usize::from(ss.entry_lag > 0.0);
+    let own = state_space_params(n, m, p) + usize::from(ss.entry_lag > 0.0);
     let own_c = select::bic(&sel.extended, own);
     let own_h = select::heldout_rmse(&prep, &sel.extended.pred);
     let pr = Prepared::new(rec, Baseline::Series, test.to_vec());
@@ -187,8 +186,14 @@ pub(crate) fn searched<'b>(
         return None;
     }
     let (n, m, p) = (ss.order(), rec.inputs.len(), rec.outputs.len());
-    Some((ss, n * (n + m) + p * (n + m + 1)))
+    Some((ss, state_space_params(n, m, p)))
 }
 
 /// Lower baseline orders tried once a cause is named (see [`lower_orders`]).
 const LOWER_ORDERS: usize = 2;
+
+/// Free parameters of an order-`n` state-space baseline with `m` inputs and `p` outputs:
+/// `A`, `B` and the output map `C, D, d`.
+fn state_space_params(n: usize, m: usize, p: usize) -> usize {
+    n * (n + m) + p * (n + m + 1)
+}
