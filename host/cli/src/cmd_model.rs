@@ -14,6 +14,8 @@ pub enum ModelCommand {
     /// (tension positive; eq 3.9), to a CSV with columns `time_s,pressure_kpa,strain`.
     Axial {
         /// Input CSV with the columns `time_s,pressure_kpa,strain`; other columns are kept.
+        /// Pressures are gauge (below -101.325 kPa is an error); rows outside the
+        /// configuration's `[table]` pressure range are written with a warning.
         input: PathBuf,
         /// Output CSV: the input columns plus `force_n`.
         #[arg(long)]
@@ -41,9 +43,14 @@ pub enum ModelCommand {
 pub fn run(cmd: ModelCommand) -> Result<()> {
     match cmd {
         ModelCommand::Axial { input, out, config } => {
-            let model = OcmModel::new(Config::load(config.as_deref())?.ocm)?;
-            let rows = axial(&model, &input, &out)?;
-            println!("wrote {} rows to {}", rows, out.display());
+            let cfg = Config::load(config.as_deref())?;
+            let model = OcmModel::new(cfg.ocm)?;
+            let range = (cfg.table.p_min_kpa, cfg.table.p_max_kpa);
+            let written = axial(&model, range, &input, &out)?;
+            if let Some(w) = &written.outside {
+                eprintln!("warning: {w}");
+            }
+            println!("wrote {} rows to {}", written.rows, out.display());
             Ok(())
         }
         ModelCommand::Assumptions { config, json } => {
@@ -94,9 +101,28 @@ fn print_assumptions(r: &AssumptionReport) {
     );
 }
 
-/// Reads `input`, evaluates `F_A(strain, pressure)` per row and writes `out`.
-/// Returns the number of data rows.
-pub fn axial(model: &OcmModel, input: &Path, out: &Path) -> Result<usize> {
+/// Lowest gauge pressure there is: absolute vacuum at standard atmosphere, kPa.
+const VACUUM_GAUGE_KPA: f64 = -101.325;
+
+/// What [`axial`] wrote.
+#[derive(Debug)]
+pub struct AxialWritten {
+    /// Data rows written.
+    pub rows: usize,
+    /// Rows whose pressure lies outside the configured table range, in words (the model is
+    /// linear in pressure and extrapolates there); `None` when all lie inside.
+    pub outside: Option<String>,
+}
+
+/// Reads `input`, evaluates `F_A(strain, pressure)` per row and writes `out`. Pressures are
+/// gauge: one below absolute vacuum is an error; rows outside `range_kpa` (the table's
+/// pressure range) are counted in the result.
+pub fn axial(
+    model: &OcmModel,
+    range_kpa: (f64, f64),
+    input: &Path,
+    out: &Path,
+) -> Result<AxialWritten> {
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .from_path(input)
@@ -127,6 +153,8 @@ pub fn axial(model: &OcmModel, input: &Path, out: &Path) -> Result<usize> {
     }
     let (lo, hi) = model.strain_limits();
     let mut rows = Vec::new();
+    // (count, first line, its pressure)
+    let mut outside: Option<(usize, usize, f64)> = None;
     for (i, record) in reader.records().enumerate() {
         let line = i + 2;
         let record = record
@@ -152,6 +180,16 @@ pub fn axial(model: &OcmModel, input: &Path, out: &Path) -> Result<usize> {
         field(c_t)?;
         let p_kpa = field(c_p)?;
         let eps = field(c_e)?;
+        if p_kpa < VACUUM_GAUGE_KPA {
+            bail!(
+                "{} line {line}, column `pressure_kpa`: {p_kpa} kPa is below absolute vacuum ({VACUUM_GAUGE_KPA} kPa gauge; pressures are gauge)",
+                input.display()
+            );
+        }
+        if !(range_kpa.0..=range_kpa.1).contains(&p_kpa) {
+            let o = outside.get_or_insert((0, line, p_kpa));
+            o.0 += 1;
+        }
         if !(eps > lo && eps < hi) {
             bail!(
                 "{} line {line}, column `strain`: {eps} is outside the model's range ({lo}, {hi:.4})",
@@ -174,5 +212,16 @@ pub fn axial(model: &OcmModel, input: &Path, out: &Path) -> Result<usize> {
         w.write_record(r)?;
     }
     w.flush()?;
-    Ok(rows.len())
+    Ok(AxialWritten {
+        rows: rows.len(),
+        outside: outside.map(|(n, line, p)| {
+            format!(
+                "{}: {n} of {} rows (the first on line {line}: {p} kPa) lie outside the configured pressure range [{}, {}] kPa (`[table] p_min_kpa/p_max_kpa`); the energy model is linear in pressure and extrapolates there",
+                input.display(),
+                rows.len(),
+                range_kpa.0,
+                range_kpa.1
+            )
+        }),
+    })
 }

@@ -153,6 +153,17 @@ fn check_rejects_a_corrupted_image() {
     assert!(text(&out).contains("parameter hash"), "{}", text(&out));
 }
 
+/// Runs `ocm model axial INPUT --out OUTPUT`.
+fn model_axial(input: &std::path::Path, output: &std::path::Path) -> std::process::Output {
+    ocm(&[
+        "model",
+        "axial",
+        input.to_str().unwrap(),
+        "--out",
+        output.to_str().unwrap(),
+    ])
+}
+
 #[test]
 fn model_axial_adds_the_force_column() {
     let dir = scratch("model_axial");
@@ -163,13 +174,7 @@ fn model_axial_adds_the_force_column() {
     )
     .unwrap();
     let output = dir.join("out.csv");
-    let out = ocm(&[
-        "model",
-        "axial",
-        input.to_str().unwrap(),
-        "--out",
-        output.to_str().unwrap(),
-    ]);
+    let out = model_axial(&input, &output);
     assert!(out.status.success(), "{}", text(&out));
     let model = OcmModel::new(OcmParams::CALIBRATED).unwrap();
     let written = std::fs::read_to_string(&output).unwrap();
@@ -190,6 +195,36 @@ fn model_axial_adds_the_force_column() {
 }
 
 #[test]
+fn model_axial_warns_of_pressures_outside_the_table_range() {
+    let dir = scratch("model_axial_range");
+    let input = dir.join("in.csv");
+    std::fs::write(
+        &input,
+        "time_s,pressure_kpa,strain\n0,10,0.1\n0.1,1e9,0.1\n0.2,-50,0.1\n0.3,20,0.1\n",
+    )
+    .unwrap();
+    let output = dir.join("out.csv");
+    let out = model_axial(&input, &output);
+    // the rows are still written (the model extrapolates linearly), with a warning that counts
+    // them and names the first
+    assert!(out.status.success(), "{}", text(&out));
+    let msg = text(&out);
+    assert!(
+        msg.contains("2 of 4 rows (the first on line 3: 1000000000 kPa) lie outside the configured pressure range [0, 30] kPa"),
+        "{msg}"
+    );
+    assert_eq!(std::fs::read_to_string(&output).unwrap().lines().count(), 5);
+    // inside the range: no warning
+    std::fs::write(&input, "time_s,pressure_kpa,strain\n0,10,0.1\n").unwrap();
+    let out = model_axial(&input, &output);
+    assert!(
+        out.status.success() && !text(&out).contains("warning"),
+        "{}",
+        text(&out)
+    );
+}
+
+#[test]
 fn model_axial_names_file_line_and_column_of_bad_input() {
     let dir = scratch("model_axial_bad");
     let output = dir.join("out.csv");
@@ -206,17 +241,15 @@ fn model_axial_names_file_line_and_column_of_bad_input() {
             "time_s,pressure_kpa,strain\n0,1,5.0\n",
             "outside the model's range",
         ),
+        (
+            "time_s,pressure_kpa,strain\n0,1,0.1\n0.1,-150,0.1\n",
+            "line 3, column `pressure_kpa`: -150 kPa is below absolute vacuum",
+        ),
         ("time_s,strain\n0,0.1\n", "missing column `pressure_kpa`"),
     ] {
         let input = dir.join("in.csv");
         std::fs::write(&input, body).unwrap();
-        let out = ocm(&[
-            "model",
-            "axial",
-            input.to_str().unwrap(),
-            "--out",
-            output.to_str().unwrap(),
-        ]);
+        let out = model_axial(&input, &output);
         assert!(!out.status.success());
         let msg = text(&out);
         assert!(msg.contains(needle) && msg.contains("in.csv"), "{msg}");

@@ -3,11 +3,12 @@
 
 use super::features::Features;
 use super::loop_signal::LoopSignal;
-use super::prepared::{Prepared, channel_scale};
+use super::prepared::{LatencyKey, Prepared, channel_scale};
 use crate::baseline::Baseline;
 use crate::cause::Cause;
 use crate::lsq;
 use crate::signal;
+use rayon::prelude::*;
 
 /// Dead times of the latency extension's coarse grid, in samples (refined to fractions).
 const DELAYS: [f64; 8] = [0.0, 1.0, 2.0, 3.0, 5.0, 8.0, 13.0, 21.0];
@@ -39,6 +40,31 @@ pub struct SetFit {
 /// Time constants (samples) of the Laguerre poles tried by the actuator variant of
 /// `nonlinearity`: with 8 filters each spans a memory of about 16 to 400 samples.
 const ACTUATOR_LAGS: [f64; 4] = [1.0, 3.0, 8.0, 24.0];
+
+/// Per output channel: the least-squares fit, the prediction on every row and the number of
+/// the baseline's regressors in the fit.
+type ChannelFits = Vec<(lsq::LsqFit, Vec<f64>, usize)>;
+
+/// A point of the latency search: training RSS, dead time and lag (samples), and the fit
+/// (`None` outside the search's bounds).
+type Point = (f64, f64, f64, Option<ChannelFits>);
+
+/// Whether a sequential search would take this point: inside the bounds, with a finite RSS.
+fn takeable(p: &Point) -> bool {
+    p.3.is_some() && p.0 < f64::INFINITY
+}
+
+/// The earlier of two points of the search unless the later one is strictly lower: reduced
+/// in the order the points are visited (associative, so in parallel too), this keeps the first
+/// lowest point, as a sequential search that replaces its best only on a strict improvement
+/// does.
+fn earlier(a: Point, b: Point) -> Point {
+    if takeable(&b) && (!takeable(&a) || b.0 < a.0) {
+        b
+    } else {
+        a
+    }
+}
 
 impl Prepared<'_> {
     /// Fits the baseline plus the extensions of `causes` jointly on the training rows.
@@ -113,6 +139,35 @@ impl Prepared<'_> {
 
     /// [`Prepared::fit_set`] for the variant of `nonlinearity` set by `actuator_pole`.
     fn fit_set_variant(&self, causes: &[Cause]) -> SetFit {
+        if !causes.contains(&Cause::Latency) {
+            return self.fit_set_computed(causes);
+        }
+        let key = LatencyKey {
+            causes: causes.to_vec(),
+            flexible: self.flexible.get(),
+            memory_sign: self.memory_sign.get().to_bits(),
+            actuator_pole: self.actuator_pole.get().map(f64::to_bits),
+            hint: (causes.len() > 1)
+                .then(|| self.latency_hint.get())
+                .flatten()
+                .map(|(d, m)| (d.to_bits(), m.to_bits())),
+        };
+        let hit = self
+            .latency_fits
+            .borrow()
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|(_, f)| f.clone());
+        if let Some(f) = hit {
+            return f;
+        }
+        let f = self.fit_set_computed(causes);
+        self.latency_fits.borrow_mut().push((key, f.clone()));
+        f
+    }
+
+    /// [`Prepared::fit_set_variant`] without the store of latency fits.
+    fn fit_set_computed(&self, causes: &[Cause]) -> SetFit {
         let rec = self.rec;
         let n = rec.len();
         let starts = &rec.segment_starts;
@@ -157,9 +212,12 @@ impl Prepared<'_> {
                 delayed
             }
         };
-        let fit_at = |d: f64, tau: f64| {
+        // only `Sync` parts of the record are captured: the grid and the profile run in parallel
+        let (channels, train, dt) = (&self.channels, &self.train, self.dt);
+        let feats = &feats;
+        let fit_at = |d: f64, tau: f64| -> ChannelFits {
             let mut out = Vec::new();
-            for (c, ch) in self.channels.iter().enumerate() {
+            for (c, ch) in channels.iter().enumerate() {
                 let shift = d > 0.0 || tau > 0.0;
                 let tr = |x: &Vec<f64>| if shift { lag(x, d, tau) } else { x.clone() };
                 let fixed = tr(&ch.design.fixed);
@@ -175,7 +233,7 @@ impl Prepared<'_> {
                 cols.extend(ext_ref.iter().map(|r| r.as_slice()));
                 let mut nn = ch.design.nonneg.clone();
                 nn.extend(&feats[c].2);
-                let fit = lsq::fit(&cols, &target, &self.train, &nn);
+                let fit = lsq::fit(&cols, &target, train, &nn);
                 let mut pred = lsq::predict(&cols, &fit.coef, n);
                 for (p, f) in pred.iter_mut().zip(&fixed) {
                     *p += f;
@@ -184,29 +242,55 @@ impl Prepared<'_> {
             }
             out
         };
-        let total_rss = |f: &Vec<(lsq::LsqFit, Vec<f64>, usize)>| -> f64 {
+        let total_rss = |f: &ChannelFits| -> f64 {
             f.iter()
-                .zip(&self.channels)
-                .map(|((fit, _, _), ch)| fit.rss / channel_scale(ch, &self.train))
+                .zip(channels)
+                .map(|((fit, _, _), ch)| fit.rss / channel_scale(ch, train))
                 .sum()
         };
         let mut best = (0.0f64, 0.0f64);
         let mut fits = if with_latency {
             let max_delay = (n / 20) as f64;
-            let mut best_rss = f64::INFINITY;
-            let mut best_fit = None;
-            let mut consider = |d: f64, m: f64, best: &mut (f64, f64)| -> f64 {
+            // One point of the search: its training RSS (infinite outside the search's
+            // bounds) and its fit.
+            let eval = |d: f64, m: f64| -> Point {
                 if d < 0.0 || m < 0.0 || d > max_delay || (d == 0.0 && m == 0.0) {
-                    return f64::INFINITY;
+                    return (f64::INFINITY, d, m, None);
                 }
-                let f = fit_at(d, m * self.dt);
-                let r = total_rss(&f);
-                if r < best_rss {
-                    best_rss = r;
-                    *best = (d, m);
-                    best_fit = Some(f);
+                let f = fit_at(d, m * dt);
+                (total_rss(&f), d, m, Some(f))
+            };
+            // A golden-section search of the log lag at dead time `d` over `[a, b]`: every
+            // point visited, in the order visited, reduced to the first lowest (see `earlier`).
+            let golden = |d: f64, mut a: f64, mut b: f64, iters: usize| -> Point {
+                let g = 0.5 * (5f64.sqrt() - 1.0);
+                let mut x1 = b - g * (b - a);
+                let mut x2 = a + g * (b - a);
+                let p1 = eval(d, x1.exp());
+                let p2 = eval(d, x2.exp());
+                let (mut f1, mut f2) = (p1.0, p2.0);
+                let mut kept = earlier(p1, p2);
+                for _ in 0..iters {
+                    let p = if f1 < f2 {
+                        b = x2;
+                        x2 = x1;
+                        f2 = f1;
+                        x1 = b - g * (b - a);
+                        let p = eval(d, x1.exp());
+                        f1 = p.0;
+                        p
+                    } else {
+                        a = x1;
+                        x1 = x2;
+                        f1 = f2;
+                        x2 = a + g * (b - a);
+                        let p = eval(d, x2.exp());
+                        f2 = p.0;
+                        p
+                    };
+                    kept = earlier(kept, p);
                 }
-                r
+                kept
             };
             // Sets with further causes reuse the single-cause latency estimate.
             let hint = if causes.len() > 1 {
@@ -214,81 +298,62 @@ impl Prepared<'_> {
             } else {
                 None
             };
-            if let Some((d_fix, m_fix)) = hint {
+            let found = if let Some((d_fix, m_fix)) = hint {
                 // The single-cause estimate is biased by whatever else is in the data: refine
                 // it locally with the other extensions in the fit (lag by golden section on
                 // its log, then the dead time on quarter samples).
-                consider(d_fix, m_fix, &mut best);
-                let g = 0.5 * (5f64.sqrt() - 1.0);
                 let centre = if m_fix > 0.0 {
                     m_fix.ln()
                 } else {
                     (0.25f64).ln()
                 };
-                let (mut a, mut b) = (centre - 0.8, centre + 0.8);
-                let mut x1 = b - g * (b - a);
-                let mut x2 = a + g * (b - a);
-                let mut f1 = consider(d_fix, x1.exp(), &mut best);
-                let mut f2 = consider(d_fix, x2.exp(), &mut best);
-                for _ in 0..5 {
-                    if f1 < f2 {
-                        b = x2;
-                        x2 = x1;
-                        f2 = f1;
-                        x1 = b - g * (b - a);
-                        f1 = consider(d_fix, x1.exp(), &mut best);
-                    } else {
-                        a = x1;
-                        x1 = x2;
-                        f1 = f2;
-                        x2 = a + g * (b - a);
-                        f2 = consider(d_fix, x2.exp(), &mut best);
-                    }
-                }
-                let m_best = best.1;
-                for step in [-0.5, -0.25, 0.25, 0.5] {
-                    consider(d_fix + step, m_best, &mut best);
-                }
+                let mut kept = eval(d_fix, m_fix);
+                kept = earlier(kept, golden(d_fix, centre - 0.8, centre + 0.8, 5));
+                let m_best = if takeable(&kept) { kept.2 } else { 0.0 };
+                let steps: Vec<Point> = [-0.5, -0.25, 0.25, 0.5]
+                    .into_par_iter()
+                    .map(|step| eval(d_fix + step, m_best))
+                    .collect();
+                steps.into_iter().fold(kept, earlier)
             } else {
-                for &d in &DELAYS {
-                    for &m in &LAGS {
-                        consider(d, m, &mut best);
-                    }
-                }
+                let grid: Vec<(f64, f64)> = DELAYS
+                    .iter()
+                    .flat_map(|&d| LAGS.iter().map(move |&m| (d, m)))
+                    .collect();
+                let coarse = grid
+                    .into_par_iter()
+                    .map(|(d, m)| eval(d, m))
+                    .reduce_with(earlier)
+                    .unwrap_or((f64::INFINITY, 0.0, 0.0, None));
                 // Dead time and lag trade off along a narrow valley: profile the dead time on
                 // quarter samples and golden-search the log lag constant at each.
-                let (d0, m0) = best;
+                let (d0, m0) = if takeable(&coarse) {
+                    (coarse.1, coarse.2)
+                } else {
+                    (0.0, 0.0)
+                };
                 let centre = if m0 > 0.0 { m0.ln() } else { (0.25f64).ln() };
-                let g = 0.5 * (5f64.sqrt() - 1.0);
+                let mut profile = Vec::new();
                 let mut d = (d0 - 2.0).max(0.0);
                 while d <= (d0 + 2.0).min(max_delay) {
-                    let (mut a, mut b) = (centre - 2.5, centre + 2.5);
-                    let mut x1 = b - g * (b - a);
-                    let mut x2 = a + g * (b - a);
-                    let mut f1 = consider(d, x1.exp(), &mut best);
-                    let mut f2 = consider(d, x2.exp(), &mut best);
-                    for _ in 0..12 {
-                        if f1 < f2 {
-                            b = x2;
-                            x2 = x1;
-                            f2 = f1;
-                            x1 = b - g * (b - a);
-                            f1 = consider(d, x1.exp(), &mut best);
-                        } else {
-                            a = x1;
-                            x1 = x2;
-                            f1 = f2;
-                            x2 = a + g * (b - a);
-                            f2 = consider(d, x2.exp(), &mut best);
-                        }
-                    }
+                    profile.push(d);
                     d += 0.25;
                 }
-                if causes.len() == 1 {
-                    self.latency_hint.set(Some(best));
-                }
+                let fine = profile
+                    .into_par_iter()
+                    .map(|d| golden(d, centre - 2.5, centre + 2.5, 12))
+                    .reduce_with(earlier);
+                fine.into_iter().fold(coarse, earlier)
+            };
+            let taken = takeable(&found);
+            let (_, d, m, fit) = found;
+            if taken {
+                best = (d, m);
             }
-            best_fit.unwrap_or_else(|| fit_at(0.0, 0.0))
+            if causes.len() == 1 && hint.is_none() {
+                self.latency_hint.set(Some(best));
+            }
+            fit.filter(|_| taken).unwrap_or_else(|| fit_at(0.0, 0.0))
         } else {
             fit_at(0.0, 0.0)
         };
@@ -325,7 +390,7 @@ impl Prepared<'_> {
         // Standard errors of the latency parameters from the curvature of the residual sum of
         // squares (profile likelihood, Gaussian residuals): se = sqrt(2 s^2 / RSS'').
         let latency_se = if with_latency {
-            let rows = self.train.iter().filter(|t| **t).count() * self.channels.len();
+            let rows = train.iter().filter(|t| **t).count() * self.channels.len();
             let r0 = total_rss(&fits);
             let s2 = r0 / (rows.saturating_sub(1).max(1)) as f64;
             let curv_se = |f: &dyn Fn(f64) -> f64, x: f64, h: f64| -> f64 {
@@ -339,17 +404,17 @@ impl Prepared<'_> {
             let (d, m) = best;
             let hd = 0.25;
             let se_d = if d >= hd {
-                curv_se(&|x| total_rss(&fit_at(x, m * self.dt)), d, hd)
+                curv_se(&|x| total_rss(&fit_at(x, m * dt)), d, hd)
             } else {
                 f64::NAN
             };
             let hm = (0.1 * m).max(0.05);
             let se_m = if m >= hm {
-                curv_se(&|x| total_rss(&fit_at(d, x * self.dt)), m, hm)
+                curv_se(&|x| total_rss(&fit_at(d, x * dt)), m, hm)
             } else {
                 f64::NAN
             };
-            (se_d * self.dt, se_m * self.dt)
+            (se_d * dt, se_m * dt)
         } else {
             (0.0, 0.0)
         };

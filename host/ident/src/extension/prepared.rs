@@ -73,6 +73,23 @@ pub struct Prepared<'a> {
     /// output leads the simulated one through the memory in its inputs or lags it (see
     /// `joint_fit`: both are fitted, the lower BIC kept).
     pub memory_sign: std::cell::Cell<f64>,
+    /// Fits of sets with latency, by everything they depend on (see `joint_fit`): they are
+    /// not refined in the loop, so a repeated set (a swap back to a single cause, the
+    /// backward check) gives the same fit, and its dead-time search is the selection's
+    /// costliest.
+    pub(super) latency_fits: std::cell::RefCell<Vec<(LatencyKey, super::SetFit)>>,
+}
+
+/// What the fit of a set with latency depends on beyond the record: the set, the flexible
+/// cause, the hysteresis orientation, the actuator pole and (for a set of several causes) the
+/// single-cause latency estimate it starts from; floats by their bits.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(super) struct LatencyKey {
+    pub(super) causes: Vec<Cause>,
+    pub(super) flexible: Option<Cause>,
+    pub(super) memory_sign: u64,
+    pub(super) actuator_pole: Option<u64>,
+    pub(super) hint: Option<(u64, u64)>,
 }
 
 impl<'a> Prepared<'a> {
@@ -195,6 +212,7 @@ impl<'a> Prepared<'a> {
             actuator_pole: std::cell::Cell::new(None),
             in_loop_cache: std::cell::RefCell::new(Vec::new()),
             memory_sign: std::cell::Cell::new(1.0),
+            latency_fits: std::cell::RefCell::new(Vec::new()),
         }
     }
 
