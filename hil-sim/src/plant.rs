@@ -286,30 +286,106 @@ impl Plant {
     pub fn new(params: PlantParams, seed: u64) -> Result<Self, SimError> {
         let model = OcmModel::new(params.ocm).map_err(|e| SimError::Config(e.to_string()))?;
         let m = &params.manipulator;
-        let ok = m.column_radius_m > 0.0
-            && m.plate_mass_kg >= 0.0
-            && (1..=8).contains(&m.ocms_per_column)
-            && params.dt_s > 0.0
-            && params.dt_s <= 0.01
-            && params.plate_inertia_kg_m2 > 0.0
-            && params.column_damping_n_s_per_m >= 0.0
-            && params.regulator.min_pa < params.regulator.max_pa
-            && params.regulator.time_constant_s > 0.0
-            && params.regulator.dead_time_s >= 0.0
-            && params.end_stop_n_per_m > 0.0
-            && [
-                params.effects.hysteresis_fraction,
-                params.effects.hysteresis_reference_n,
-                params.effects.stiffness_spread,
-                params.effects.regulator_offset_pa,
-            ]
-            .iter()
-            .all(|v| v.is_finite() && *v >= 0.0)
-            && params.effects.hysteresis_yield_m > 0.0
-            && params.effects.hysteresis_yield_m.is_finite();
-        if !ok {
+        let fx = &params.effects;
+        let reg = &params.regulator;
+        let at_least = |v: f64, lo: f64| v.is_finite() && v >= lo;
+        let above = |v: f64, lo: f64| v.is_finite() && v > lo;
+        // each check names its setting, its value and the range (NaN fails every one)
+        let checks: [(&str, f64, bool, &str); 15] = [
+            (
+                "manipulator.column_radius_m",
+                m.column_radius_m,
+                above(m.column_radius_m, 0.0),
+                "> 0",
+            ),
+            (
+                "manipulator.plate_mass_kg",
+                m.plate_mass_kg,
+                at_least(m.plate_mass_kg, 0.0),
+                ">= 0",
+            ),
+            (
+                "manipulator.ocms_per_column",
+                f64::from(m.ocms_per_column),
+                (1..=8).contains(&m.ocms_per_column),
+                "1 to 8",
+            ),
+            (
+                "dt_s",
+                params.dt_s,
+                above(params.dt_s, 0.0) && params.dt_s <= 0.01,
+                "in (0, 0.01]",
+            ),
+            (
+                "plate_inertia_kg_m2",
+                params.plate_inertia_kg_m2,
+                above(params.plate_inertia_kg_m2, 0.0),
+                "> 0",
+            ),
+            (
+                "column_damping_n_s_per_m",
+                params.column_damping_n_s_per_m,
+                at_least(params.column_damping_n_s_per_m, 0.0),
+                ">= 0",
+            ),
+            (
+                "regulator.max_pa",
+                reg.max_pa,
+                reg.min_pa.is_finite() && reg.max_pa.is_finite() && reg.min_pa < reg.max_pa,
+                "finite and above regulator.min_pa",
+            ),
+            (
+                "regulator.time_constant_s",
+                reg.time_constant_s,
+                above(reg.time_constant_s, 0.0),
+                "> 0",
+            ),
+            (
+                "regulator.dead_time_s",
+                reg.dead_time_s,
+                at_least(reg.dead_time_s, 0.0),
+                ">= 0",
+            ),
+            (
+                "end_stop_n_per_m",
+                params.end_stop_n_per_m,
+                above(params.end_stop_n_per_m, 0.0),
+                "> 0",
+            ),
+            (
+                "effects.hysteresis_fraction",
+                fx.hysteresis_fraction,
+                at_least(fx.hysteresis_fraction, 0.0),
+                ">= 0",
+            ),
+            (
+                "effects.hysteresis_reference_n",
+                fx.hysteresis_reference_n,
+                at_least(fx.hysteresis_reference_n, 0.0),
+                ">= 0",
+            ),
+            (
+                "effects.stiffness_spread",
+                fx.stiffness_spread,
+                at_least(fx.stiffness_spread, 0.0),
+                ">= 0",
+            ),
+            (
+                "effects.regulator_offset_pa",
+                fx.regulator_offset_pa,
+                at_least(fx.regulator_offset_pa, 0.0),
+                ">= 0",
+            ),
+            (
+                "effects.hysteresis_yield_m",
+                fx.hysteresis_yield_m,
+                above(fx.hysteresis_yield_m, 0.0),
+                "> 0",
+            ),
+        ];
+        if let Some((name, v, _, range)) = checks.iter().find(|c| !c.2) {
             return Err(SimError::Config(format!(
-                "plant parameters out of range: {params:?}"
+                "plant parameter {name} = {v} is out of range (must be {range})"
             )));
         }
         let potential = OcmPotential::new(&model)?;

@@ -357,3 +357,23 @@ fn state_trigonometry_follows_its_configuration() {
     p.step(&mut fresh, [8_000.0; 3]);
     assert_eq!(s.q, fresh.q);
 }
+
+#[test]
+fn a_setting_out_of_range_is_named_with_its_value() {
+    let params = PlantParams {
+        dt_s: f64::NAN,
+        ..PlantParams::default()
+    };
+    let e = match Plant::new(params, 1) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("a NaN step is accepted"),
+    };
+    assert!(e.contains("dt_s = NaN") && e.contains("(0, 0.01]"), "{e}");
+    let mut params = PlantParams::default();
+    params.effects.stiffness_spread = -0.1;
+    let e = match Plant::new(params, 1) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("a negative spread is accepted"),
+    };
+    assert!(e.contains("effects.stiffness_spread = -0.1"), "{e}");
+}

@@ -231,13 +231,17 @@ pub fn run(cmd: FemCommand) -> anyhow::Result<()> {
                 .dynamic
                 .as_ref()
                 .map_or(prepared.loads.len(), |d| d.steps);
+            // the output directory first: a path that cannot be written fails before the solve
+            if let Some(dir) = &out {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("creating the output directory {}", dir.display()))?;
+            }
             let pb = bar(n, "solving");
             let t0 = std::time::Instant::now();
             let results = prepared.run(|k, _| pb.set_position(k as u64))?;
             pb.finish_and_clear();
             let secs = t0.elapsed().as_secs_f64();
             if let Some(dir) = &out {
-                std::fs::create_dir_all(dir)?;
                 let scale: Vec<f64> = prepared
                     .model
                     .element_scale
@@ -347,6 +351,13 @@ pub fn run(cmd: FemCommand) -> anyhow::Result<()> {
                 ..d
             };
             let b = Bellows::load(&mesh, cfg.clone())?;
+            // the outputs' folders first: a path that cannot be written fails before the sweep
+            for file in std::iter::once(&out).chain(npy.as_ref()) {
+                if let Some(dir) = file.parent().filter(|d| !d.as_os_str().is_empty()) {
+                    std::fs::create_dir_all(dir)
+                        .with_context(|| format!("creating the folder of {}", file.display()))?;
+                }
+            }
             let states = sweep::grid(&values_kpa);
             let pb = bar(states.len(), "pressure states");
             let mut snaps: Vec<Vec<f64>> = vec![];

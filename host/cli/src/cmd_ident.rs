@@ -8,6 +8,10 @@ use ocm_ident::baseline::SeriesModel;
 use ocm_ident::synth::{Spec, generate};
 use ocm_ident::{Cause, Config, Kind, report, softarm};
 
+/// Most rows `ocm ident synth` writes: ten times the benchmark's record, a few hundred MB of
+/// CSV (a larger count is more likely a typo than a record anyone identifies).
+const MAX_SYNTH_ROWS: usize = 1_000_000;
+
 /// Record kinds (the column schema of the CSV).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum KindArg {
@@ -107,7 +111,7 @@ pub struct SynthArgs {
     /// the baseline's free parameters absorb some (an offset or a gain of a series map).
     #[arg(long, value_enum, default_value_t = EffectArg::None)]
     pub effect: EffectArg,
-    /// Rows of the record.
+    /// Rows of the record (100 to 1,000,000).
     #[arg(long, default_value_t = 4000)]
     pub rows: usize,
     /// Seed: the same seed writes the same record.
@@ -175,8 +179,11 @@ fn synth(args: SynthArgs) -> anyhow::Result<()> {
             args.out.display()
         );
     }
-    if args.rows < 100 {
-        bail!("--rows must be at least 100, got {}", args.rows);
+    if !(100..=MAX_SYNTH_ROWS).contains(&args.rows) {
+        bail!(
+            "--rows must be between 100 and {MAX_SYNTH_ROWS}, got {}",
+            args.rows
+        );
     }
     let kind = args.kind.kind();
     let cause = args.effect.cause();

@@ -286,7 +286,7 @@ fn plot_prediction(out: &Path, fwd: &TrainedForward, traj: &Trajectory) -> Resul
             traj.state_dim
         );
     }
-    std::fs::create_dir_all(out)?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let data = Samples::build(
         std::slice::from_ref(traj),
         fwd.config.window,
@@ -335,7 +335,8 @@ fn plot_prediction(out: &Path, fwd: &TrainedForward, traj: &Trajectory) -> Resul
             1e3 * pred[s * n + 2]
         ));
     }
-    std::fs::write(out.join("prediction.csv"), csv)?;
+    let csv_path = out.join("prediction.csv");
+    std::fs::write(&csv_path, csv).with_context(|| format!("writing {}", csv_path.display()))?;
     Chart {
         title: "TCP velocity: forward model against truth (held-out sequence)",
         x_label: "time (s)",
@@ -346,9 +347,21 @@ fn plot_prediction(out: &Path, fwd: &TrainedForward, traj: &Trajectory) -> Resul
     .write(out, "prediction")
 }
 
+/// Largest batch `ocm learn bench` times: a batch is `batch x window x step` floats, and a
+/// million windows of the default model is already about 1 GB.
+const MAX_BENCH_BATCH: usize = 1 << 20;
+
 fn run_bench(a: BenchArgs) -> Result<()> {
     use ocm_learn::burn::tensor::{Tensor, TensorData};
     use std::time::Instant;
+    // an empty batch reaches the matrix kernels with zero-sized operands (a crash, not an
+    // error), and a huge one exhausts the memory
+    if !(1..=MAX_BENCH_BATCH).contains(&a.batch) {
+        bail!(
+            "--batch must be between 1 and {MAX_BENCH_BATCH}, got {}",
+            a.batch
+        );
+    }
     let fwd = TrainedForward::load(&a.forward)
         .with_context(|| format!("loading {}", a.forward.display()))?;
     let (m, f) = (fwd.config.window, fwd.config.step_dim());

@@ -580,6 +580,10 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
             out,
             json,
         } => {
+            // checked before training, so that a bad count does not cost the trained policy
+            if eval_episodes == 0 {
+                anyhow::bail!("--eval-episodes must be at least 1");
+            }
             let robot = robot(&model)?;
             let kind = task.kind();
             if init_from.is_some() && matches!(algo, Algorithm::Bc) {
@@ -765,6 +769,9 @@ pub fn run(cmd: RlCommand) -> anyhow::Result<()> {
             deploy,
             random,
         } => {
+            if episodes == 0 {
+                anyhow::bail!("--episodes must be at least 1");
+            }
             let robot = robot(&model)?;
             let loaded = match &policy {
                 Some(p) => {

@@ -212,7 +212,25 @@ pub fn run(args: TrackArgs) -> Result<()> {
     let image = match (&args.lut, &args.mcu) {
         (_, McuMode::Host) => Vec::new(),
         (Some(path), _) => {
-            std::fs::read(path).with_context(|| format!("reading the LUT {}", path.display()))?
+            let bytes = std::fs::read(path)
+                .with_context(|| format!("reading the LUT {}", path.display()))?;
+            // checked here, where the file's name is known: the firmware's refusal names
+            // neither the file nor the reason
+            let image = ocm_shared::lut::LutImage::parse(&bytes).map_err(|e| {
+                anyhow::anyhow!(
+                    "{}: invalid LUT image: {e:?} (`ocm lut check` says more)",
+                    path.display()
+                )
+            })?;
+            let want = cfg.plant.ocm.hash();
+            if image.param_hash() != want {
+                anyhow::bail!(
+                    "{}: built for other OCM parameters (hash {:#018x}) than the lab's plant ({want:#018x}): build the LUT with the same --params or --config as this run",
+                    path.display(),
+                    image.param_hash()
+                );
+            }
+            bytes
         }
         (None, _) => lut_image(&cfg.plant, &cfg.limits)?,
     };

@@ -65,17 +65,32 @@ impl Chart<'_> {
         let err = |e: DrawingAreaErrorKind<DB::ErrorType>| anyhow::anyhow!("{e:?}");
         area.fill(&WHITE).map_err(err)?;
         let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-        for p in self.series.iter().flat_map(|s| &s.points) {
+        // finite points only: an axis range at infinity or at f64::MAX (no points at all)
+        // sends the tick search into an endless loop
+        for p in self
+            .series
+            .iter()
+            .flat_map(|s| &s.points)
+            .filter(|p| p.0.is_finite() && p.1.is_finite())
+        {
             x0 = x0.min(p.0);
             x1 = x1.max(p.0);
             y0 = y0.min(p.1);
             y1 = y1.max(p.1);
         }
+        if x0 > x1 {
+            (x0, x1) = (0.0, 1.0);
+        }
+        if y0 > y1 {
+            (y0, y1) = (0.0, 1.0);
+        }
+        // a flat series: a unit range above it, or its own scale where that is not resolved
+        // beside the value
         if x0 >= x1 {
-            x1 = x0 + 1.0;
+            x1 = x0 + x0.abs().max(1.0);
         }
         if y0 >= y1 {
-            y1 = y0 + 1.0;
+            y1 = y0 + y0.abs().max(1.0);
         }
         let mut pad = 0.04 * (y1 - y0);
         if self.equal_axes {
@@ -134,5 +149,41 @@ impl Chart<'_> {
             .map_err(err)?;
         area.present().map_err(err)?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A chart with no points, or with only non-finite ones, is drawn on a unit range (the axis
+    /// search looped for ever on the range an empty series left); a flat series gets a range.
+    #[test]
+    fn empty_flat_and_non_finite_series_are_drawn() {
+        let dir = std::env::temp_dir().join(format!("ocm-plot-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let cases: [Vec<(f64, f64)>; 4] = [
+            vec![],
+            vec![(f64::NAN, 1.0), (f64::INFINITY, 2.0)],
+            vec![(0.0, 5.0), (1.0, 5.0)],
+            vec![(0.0, 1.0), (f64::INFINITY, f64::NEG_INFINITY), (1.0, 2.0)],
+        ];
+        for (i, points) in cases.into_iter().enumerate() {
+            Chart {
+                title: "t",
+                x_label: "x",
+                y_label: "y",
+                series: vec![Series {
+                    label: "s".into(),
+                    points,
+                    dots: i % 2 == 0,
+                }],
+                equal_axes: i == 3,
+            }
+            .write(&dir, &format!("c{i}"))
+            .unwrap();
+            assert!(dir.join(format!("c{i}.png")).exists());
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -182,3 +182,47 @@ fn the_example_config_is_the_default_lab_and_bad_keys_are_named() {
         "{err}"
     );
 }
+
+#[test]
+fn a_bad_or_foreign_lut_is_named_before_the_run() {
+    let dir = std::env::temp_dir().join(format!("ocm-track-lut-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // not an image: the firmware's refusal named neither the file nor the reason
+    let junk = dir.join("junk.lut");
+    std::fs::write(&junk, vec![7u8; 1000]).unwrap();
+    let err = track_fails(&[
+        "--short",
+        "--scenario",
+        "circle",
+        "--lut",
+        junk.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("junk.lut") && err.contains("invalid LUT image"),
+        "{err}"
+    );
+    // an image of the Table 3.1 parameters for the lab's calibrated plant
+    let foreign = dir.join("table31.lut");
+    let built = Command::new(env!("CARGO_BIN_EXE_ocm"))
+        .args(["lut", "build", "--params", "table-3.1", "--out"])
+        .arg(&foreign)
+        .output()
+        .expect("the ocm binary runs");
+    assert!(
+        built.status.success(),
+        "{}",
+        String::from_utf8_lossy(&built.stderr)
+    );
+    let err = track_fails(&[
+        "--short",
+        "--scenario",
+        "circle",
+        "--lut",
+        foreign.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("table31.lut") && err.contains("built for other OCM parameters"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

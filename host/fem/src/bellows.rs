@@ -88,6 +88,12 @@ impl Default for BellowsConfig {
 }
 
 impl BellowsConfig {
+    /// Refuses elastic constants out of range, naming the one given (see
+    /// [`crate::material::check_elastic`]).
+    pub fn validate(&self) -> Result<()> {
+        crate::material::check_elastic(self.young_pa, self.poisson).map_err(FemError::Model)
+    }
+
     /// The material for this configuration.
     pub fn material(&self) -> Material {
         match self.law {
@@ -147,6 +153,7 @@ impl Bellows {
 
     /// Builds the scene from a mesh in millimetres with cavity triangle surfaces.
     pub fn from_mesh(mut mesh: Mesh, config: BellowsConfig) -> Result<Self> {
+        config.validate()?;
         mesh.orient_tets();
         let comps = surface::components(&mesh.triangles);
         let mut surfaces: Vec<(f64, Vec<[usize; 3]>)> = comps

@@ -96,6 +96,24 @@ impl Material {
     }
 }
 
+/// Checks the elastic constants a user gives: a finite positive Young's modulus and a
+/// Poisson's ratio strictly inside (-1, 0.5) (0.5 is incompressible: its bulk modulus is
+/// infinite). The message names the constant and the value given (the derived Lame or bulk
+/// moduli would hide which one is wrong).
+pub fn check_elastic(young_pa: f64, poisson: f64) -> std::result::Result<(), String> {
+    if !(young_pa.is_finite() && young_pa > 0.0) {
+        return Err(format!(
+            "Young's modulus must be a positive number, got {young_pa} Pa"
+        ));
+    }
+    if !(poisson > -1.0 && poisson < 0.5) {
+        return Err(format!(
+            "Poisson's ratio must lie strictly between -1 and 0.5 (0.5 is incompressible), got {poisson}"
+        ));
+    }
+    Ok(())
+}
+
 /// Isotropic linear elasticity tensor C as a 9x9 (3i+j, 3k+l) matrix.
 pub fn linear_tensor(mu: f64, lambda: f64) -> Tangent4 {
     let mut c = Tangent4::zeros();

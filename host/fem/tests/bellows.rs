@@ -173,3 +173,34 @@ fn rigid_constraints_agree_with_the_penalty_model() {
     assert!(rigidity_error(&bc, &s, &bc.top_frame) < 1e-12);
     assert!(s.bodies[top].velocity.norm() > 0.0, "the top plate moves");
 }
+
+#[test]
+fn material_out_of_range_is_named_as_given() {
+    BellowsConfig::default().validate().unwrap();
+    for (cfg, want) in [
+        (
+            BellowsConfig {
+                poisson: 0.5,
+                ..BellowsConfig::default()
+            },
+            "Poisson's ratio must lie strictly between -1 and 0.5 (0.5 is incompressible), got 0.5",
+        ),
+        (
+            BellowsConfig {
+                young_pa: -1.0,
+                ..BellowsConfig::default()
+            },
+            "Young's modulus must be a positive number, got -1 Pa",
+        ),
+        (
+            BellowsConfig {
+                poisson: f64::NAN,
+                ..BellowsConfig::default()
+            },
+            "got NaN",
+        ),
+    ] {
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(e.contains(want), "{e}");
+    }
+}

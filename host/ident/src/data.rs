@@ -108,6 +108,10 @@ pub struct Record {
     pub states: Vec<Channel>,
 }
 
+/// Largest magnitude a channel may hold: the extensions cube the inputs and the fits sum
+/// squares over up to millions of rows, which overflows double precision well before 1e300.
+pub const MAX_MAGNITUDE: f64 = 1e30;
+
 impl Record {
     /// Number of rows.
     pub fn len(&self) -> usize {
@@ -156,6 +160,12 @@ impl Record {
                 return Err(IdentError::Invalid(format!(
                     "{}: channel {} row {} is not finite",
                     self.source, ch.name, i
+                )));
+            }
+            if let Some(i) = ch.values.iter().position(|v| v.abs() > MAX_MAGNITUDE) {
+                return Err(IdentError::Invalid(format!(
+                    "{}: channel {} row {} is {:e}, beyond {MAX_MAGNITUDE:e}: the fits' sums of squares and cubic features would overflow (give the column in a unit that keeps it smaller)",
+                    self.source, ch.name, i, ch.values[i]
                 )));
             }
         }
@@ -638,6 +648,21 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("line 11") && e.contains("strain"), "{e}");
+    }
+
+    #[test]
+    fn magnitudes_that_would_overflow_the_fits_are_refused() {
+        // values near 1e300 made every RMSE infinite and the verdict "reproduced to numerical
+        // precision"
+        let mut lines: Vec<String> = axial_text(30).lines().map(String::from).collect();
+        lines[8] = "0.7,2,0.07,1e300".into();
+        let e = parse_csv(&lines.join("\n"), "d.csv", Kind::Axial)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("d.csv") && e.contains("row 7") && e.contains("beyond 1e30"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -181,7 +181,8 @@ pub fn identify(rec: &Record, cfg: &Config) -> Result<Identification, IdentError
     // the extensions would fit the least-squares solve's last digits (a noise-free affine
     // record named `gain`, its rounding-level residual 1000x the rounding-level noise)
     let spread = output_spread(&prep);
-    let exact = baseline_rmse <= EXACT_FIT * spread;
+    let exact =
+        baseline_rmse.is_finite() && spread.is_finite() && baseline_rmse <= EXACT_FIT * spread;
     let mut sel = sel;
     if exact {
         sel.causes = vec![Cause::None];

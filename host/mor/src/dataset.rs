@@ -409,6 +409,20 @@ pub fn read(dir: &Path, basis_hash: Option<&str>) -> Result<Dataset> {
             "array list differs from this version's",
         ));
     }
+    // the shard checks below derive each sequence's rows from these three
+    if manifest.samples == 0
+        || manifest.sequence_steps == 0
+        || manifest.shards == 0
+        || manifest.samples.div_ceil(manifest.sequence_steps) != manifest.sequences
+    {
+        return Err(MorError::file(
+            &mpath,
+            format!(
+                "samples {}, sequence_steps {}, sequences {} and shards {} do not fit together (need samples >= 1, sequence_steps >= 1, shards >= 1 and sequences = ceil(samples / sequence_steps))",
+                manifest.samples, manifest.sequence_steps, manifest.sequences, manifest.shards
+            ),
+        ));
+    }
     if let Some(h) = basis_hash
         && manifest.basis_hash.as_deref() != Some(h)
     {

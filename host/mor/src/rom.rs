@@ -613,6 +613,12 @@ impl ReducedModel {
     /// to `tolerance` (relative, each configuration scaled to unit force). Returns the reduced
     /// model keeping the elements with w_e > 0.
     pub fn hyper_reduce(&self, training: &[DVector<f64>], tolerance: f64) -> Result<EcswResult> {
+        // 0 keeps every element (plain Galerkin); 1 would allow dropping them all
+        if !(0.0..1.0).contains(&tolerance) {
+            return Err(MorError::Invalid(format!(
+                "ECSW tolerance {tolerance} must lie in [0, 1) (a relative error of the training forces)"
+            )));
+        }
         let r = self.rank();
         let ne = self.elements.len();
         let (blocks, skipped) = self.contributions(training);

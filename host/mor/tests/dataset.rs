@@ -131,6 +131,18 @@ fn corrupt_or_mismatched_files_are_rejected_with_the_file_and_the_problem() {
         e.contains("manifest.json") && e.contains("basis hash"),
         "{e}"
     );
+    // Counts that do not fit together (each shard's rows are derived from them).
+    let mpath = dir.join("manifest.json");
+    let good_manifest = std::fs::read_to_string(&mpath).unwrap();
+    let mut m: serde_json::Value = serde_json::from_str(&good_manifest).unwrap();
+    m["samples"] = serde_json::json!(0);
+    std::fs::write(&mpath, m.to_string()).unwrap();
+    let e = dataset::read(&dir, None).unwrap_err().to_string();
+    assert!(
+        e.contains("manifest.json") && e.contains("samples 0") && e.contains("do not fit"),
+        "{e}"
+    );
+    std::fs::write(&mpath, good_manifest).unwrap();
     // An unfinished shard.
     std::fs::remove_file(dataset::shard_dir(&dir, 0, 2).join("shard.json")).unwrap();
     let e = dataset::read(&dir, None).unwrap_err().to_string();

@@ -158,6 +158,11 @@ fn ecsw_weights_are_non_negative_and_reproduce_the_training_forces() {
         .step_by(2)
         .map(|u| basis.transpose() * DVector::from_column_slice(u))
         .collect();
+    // a tolerance outside [0, 1) is refused, naming it
+    for bad in [f64::NAN, -1.0, 1.0] {
+        let e = rom.hyper_reduce(&training, bad).err().unwrap().to_string();
+        assert!(e.contains(&format!("ECSW tolerance {bad}")), "{e}");
+    }
     let tol = 1e-3;
     let ecsw = rom.hyper_reduce(&training, tol).unwrap();
     assert!(ecsw.weights.iter().all(|&w| w >= 0.0));

@@ -255,10 +255,24 @@ impl DemoSet {
         };
         let obs = read("obs.npy", obs_dim(m.latent_dim))?;
         let actions = read("actions.npy", N_ACTION)?;
-        let episode: Vec<usize> = read("episodes.npy", 1)?
-            .into_iter()
-            .map(|v| v as usize)
-            .collect();
+        // ids count the kept demonstrations, so each is an integer below the number of
+        // demonstrations run (a stray id would size the set by itself)
+        let ids = read("episodes.npy", 1)?;
+        if let Some(i) = ids
+            .iter()
+            .position(|&v| v < 0.0 || v.fract() != 0.0 || v >= m.outcomes.len() as f64)
+        {
+            let path = dir.join("episodes.npy");
+            return Err(PegError::file(
+                &path,
+                format!(
+                    "row {i}: episode id {} is not an integer in [0, {}) (the demonstrations run)",
+                    ids[i],
+                    m.outcomes.len()
+                ),
+            ));
+        }
+        let episode: Vec<usize> = ids.into_iter().map(|v| v as usize).collect();
         let demos = episode.iter().max().map_or(0, |e| e + 1);
         Ok(DemoSet {
             settings: m.settings,

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::bc::BcPolicy;
 use crate::encoder::TactileEncoder;
-use crate::error::Result;
+use crate::error::{PegError, Result};
 use crate::expert::ExpertConfig;
 use crate::rollout::{Outcome, observe, run_trial};
 use crate::scene::{PegScene, SceneConfig};
@@ -63,6 +63,25 @@ pub struct TrialSpec<'a> {
     pub trials: usize,
 }
 
+/// Most trials one evaluation runs: the policy's trials are built up front and step together,
+/// and the dissertation's figure rests on 100.
+pub const MAX_TRIALS: usize = 10_000;
+
+impl TrialSpec<'_> {
+    /// Refuses an empty evaluation (its success rate would be 0/0) and one beyond
+    /// [`MAX_TRIALS`].
+    pub fn validate(&self) -> Result<()> {
+        if (1..=MAX_TRIALS).contains(&self.trials) {
+            Ok(())
+        } else {
+            Err(PegError::Invalid(format!(
+                "trials = {}: need 1 to {MAX_TRIALS}",
+                self.trials
+            )))
+        }
+    }
+}
+
 fn tip_row(scene: &PegScene) -> [f64; 4] {
     let (p, _) = scene.peg_tip();
     [scene.time_s(), p[0], p[1], p[2]]
@@ -84,6 +103,7 @@ pub fn evaluate_policy(
         trials,
     } = spec;
     randomisation.validate()?;
+    spec.validate()?;
     let specs: Vec<_> = (0..trials as u64)
         .map(|i| randomisation.trial(config, seed, i))
         .collect();
@@ -142,6 +162,7 @@ pub fn evaluate_expert(
     } = spec;
     expert.validate()?;
     randomisation.validate()?;
+    spec.validate()?;
     let mut outcomes = Vec::with_capacity(trials);
     let mut tip_paths = Vec::with_capacity(trials);
     for i in 0..trials as u64 {

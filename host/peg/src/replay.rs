@@ -120,6 +120,9 @@ pub struct Frame {
     pub latent: [Vec<f32>; 2],
 }
 
+/// Most frames one replay writes (an hour of control steps at 20 Hz is 72,000).
+const MAX_FRAMES: usize = 200_000;
+
 /// Drives the gripper along `rows` (the velocity that reaches the path's pose one control step
 /// ahead, so tracking errors do not accumulate) holding the peg with `error`, one frame per
 /// control step from the path's first to its last time.
@@ -136,7 +139,13 @@ pub fn replay(
     let t0 = rows[0][0];
     let duration = rows[rows.len() - 1][0] - t0;
     let dt = config.control_dt_s();
-    let n = (duration / dt).floor() as usize;
+    let frames_f = (duration / dt).floor();
+    if frames_f.is_nan() || frames_f >= MAX_FRAMES as f64 {
+        return Err(PegError::Invalid(format!(
+            "the path lasts {duration} s: {frames_f} frames at the control step of {dt} s, more than {MAX_FRAMES}"
+        )));
+    }
+    let n = frames_f as usize;
     let p0 = rows[0];
     let start = GripperPose {
         x_m: p0[1],

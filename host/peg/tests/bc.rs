@@ -49,6 +49,23 @@ fn cloned_policy_beats_a_random_policy_and_round_trips() {
     let back = DemoSet::load(&dir).unwrap();
     assert_eq!(back.obs, demos.obs);
     assert_eq!(back.actions, demos.actions);
+    // A stray episode id (it would size the set by itself) is refused with its row.
+    let ids_path = dir.join("episodes.npy");
+    let good_ids = std::fs::read(&ids_path).unwrap();
+    let mut ids = ocm_fem::npy::read_f64_2d(&ids_path).unwrap();
+    for (v, row) in [(1e12, 5), (-1.0, 0), (0.5, 3)] {
+        let keep = ids.data[row];
+        ids.data[row] = v;
+        ocm_fem::npy::write_f64_2d_path(&ids_path, &ids.data, ids.rows, 1).unwrap();
+        let e = DemoSet::load(&dir).unwrap_err().to_string();
+        assert!(
+            e.contains("episodes.npy") && e.contains(&format!("row {row}: episode id")),
+            "{e}"
+        );
+        ids.data[row] = keep;
+    }
+    std::fs::write(&ids_path, good_ids).unwrap();
+    DemoSet::load(&dir).unwrap();
 
     let mut cfg = BcConfig {
         hidden: vec![64, 64],
@@ -80,20 +97,21 @@ fn cloned_policy_beats_a_random_policy_and_round_trips() {
         }
     }
 
+    let spec = |trials| TrialSpec {
+        scene: &scene,
+        randomisation: &rand_cfg,
+        seed: 99,
+        trials,
+    };
+    // No trials, or more than the cap, are refused before any scene is built.
+    for trials in [0, ocm_peg::eval::MAX_TRIALS + 1] {
+        let e = evaluate_policy("bc", &policy, spec(trials), &ContactFeatures, &mut |_| {})
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(&format!("trials = {trials}")), "{e}");
+    }
     let trials = 8;
-    let ev = evaluate_policy(
-        "bc",
-        &policy,
-        TrialSpec {
-            scene: &scene,
-            randomisation: &rand_cfg,
-            seed: 99,
-            trials,
-        },
-        &ContactFeatures,
-        &mut |_| {},
-    )
-    .unwrap();
+    let ev = evaluate_policy("bc", &policy, spec(trials), &ContactFeatures, &mut |_| {}).unwrap();
     // A random policy: uniform velocities within the limits, seeded.
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let mut random_successes = 0;

@@ -3,7 +3,8 @@
 
 use ocm_peg::replay::{read_path, replay, write_frames, write_path};
 use ocm_peg::{
-    ActionNoise, ContactFeatures, DemoSet, DemoSettings, ExpertConfig, Randomisation, SceneConfig,
+    ActionNoise, ContactFeatures, DemoSet, DemoSettings, ExpertConfig, InHandError, Randomisation,
+    SceneConfig,
 };
 
 fn tmp(name: &str) -> std::path::PathBuf {
@@ -97,5 +98,16 @@ fn bad_path_files_name_line_and_column() {
     }
     let e = read_path(&dir.join("missing.csv")).unwrap_err().to_string();
     assert!(e.contains("missing.csv"), "{e}");
+    // A path of 1e12 s would be billions of frames: refused before the scene is built.
+    let e = replay(
+        &SceneConfig::default(),
+        &[[0.0, 0.0, 0.0, 0.05, 0.0], [1e12, 0.0, 0.0, 0.04, 0.0]],
+        InHandError::default(),
+        &ContactFeatures,
+        &mut |_, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("frames") && e.contains("1000000000000 s"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -2,7 +2,7 @@
 //! Table 4.2), returns, and the tracked trajectories for plots.
 
 use crate::env::{Env, StepInfo};
-use crate::error::Result;
+use crate::error::{Result, RlError};
 use serde::{Deserialize, Serialize};
 
 /// Mean and standard deviation.
@@ -74,6 +74,12 @@ pub fn evaluate_episodes(
     start: &mut dyn FnMut(&mut Env) -> Result<Vec<f64>>,
     mut act: impl FnMut(&mut Env, &[f64]) -> Result<[f64; 3]>,
 ) -> Result<EvalReport> {
+    // the report's means and success rate are over the episodes: none leaves them 0/0
+    if episodes == 0 {
+        return Err(RlError::Invalid(
+            "evaluation episodes = 0: at least one is needed".into(),
+        ));
+    }
     let (mut pos, mut force, mut returns) = (vec![], vec![], vec![]);
     let mut failures = 0;
     let mut first = vec![];

@@ -364,33 +364,70 @@ impl Default for TransferConfig {
 
 impl TransferConfig {
     fn validate(&self) -> Result<()> {
-        let ok = self.command_rate_hz > 0.0
-            && self.command_rate_hz.is_finite()
-            && self.filter_window >= 1
-            && self.settle_s >= 0.0
-            && self.settle_s.is_finite()
-            && self.laps >= 1
-            && self.admittance.is_none_or(|a| {
-                a.gain_m_per_n >= 0.0
-                    && a.gain_m_per_n.is_finite()
-                    && a.max_offset_m >= 0.0
-                    && a.max_offset_m.is_finite()
-            })
-            && self.disconnect.is_none_or(|d| {
-                d.chamber < 3
-                    && d.start_s >= 0.0
-                    && d.duration_s > 0.0
-                    && d.margin_mm >= 0.0
-                    && d.hold_s >= 0.0
-            });
-        if ok {
-            Ok(())
-        } else {
-            Err(RlError::Invalid(format!(
-                "deployment settings out of range: {self:?} (rate > 0, window >= 1, settle >= 0, \
-                 laps >= 1, chamber 0..3, cut start >= 0 and duration > 0, admittance gain and \
-                 offset finite and >= 0)"
-            )))
+        let fin = |v: f64, lo: f64| v.is_finite() && v >= lo;
+        let mut checks: Vec<(&str, f64, bool, &str)> = vec![
+            (
+                "command rate (Hz)",
+                self.command_rate_hz,
+                fin(self.command_rate_hz, 0.0) && self.command_rate_hz > 0.0,
+                "> 0",
+            ),
+            (
+                "filter window",
+                self.filter_window as f64,
+                self.filter_window >= 1,
+                ">= 1",
+            ),
+            (
+                "settle time (s)",
+                self.settle_s,
+                fin(self.settle_s, 0.0),
+                ">= 0",
+            ),
+            ("laps", self.laps as f64, self.laps >= 1, ">= 1"),
+        ];
+        if let Some(a) = &self.admittance {
+            checks.push((
+                "admittance gain (m/N)",
+                a.gain_m_per_n,
+                fin(a.gain_m_per_n, 0.0),
+                ">= 0",
+            ));
+            checks.push((
+                "admittance offset (m)",
+                a.max_offset_m,
+                fin(a.max_offset_m, 0.0),
+                ">= 0",
+            ));
+        }
+        if let Some(d) = &self.disconnect {
+            // the command line counts chambers from 1
+            checks.push((
+                "cut chamber",
+                d.chamber as f64 + 1.0,
+                d.chamber < 3,
+                "1, 2 or 3",
+            ));
+            checks.push(("cut start (s)", d.start_s, fin(d.start_s, 0.0), ">= 0"));
+            checks.push((
+                "cut duration (s)",
+                d.duration_s,
+                fin(d.duration_s, 0.0) && d.duration_s > 0.0,
+                "> 0",
+            ));
+            checks.push((
+                "cut margin (mm)",
+                d.margin_mm,
+                fin(d.margin_mm, 0.0),
+                ">= 0",
+            ));
+            checks.push(("cut hold (s)", d.hold_s, fin(d.hold_s, 0.0), ">= 0"));
+        }
+        match checks.iter().find(|c| !c.2) {
+            Some((name, v, _, range)) => Err(RlError::Invalid(format!(
+                "deployment setting {name} = {v} is out of range (must be {range})"
+            ))),
+            None => Ok(()),
         }
     }
 }

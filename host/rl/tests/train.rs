@@ -27,6 +27,11 @@ fn short_behaviour_cloning_beats_a_random_policy_on_the_circle() {
     assert!(curve.last().unwrap().train_loss < 0.2 * curve[0].train_loss);
     let mut env = Env::new(r.clone(), cfg).unwrap();
     let trained = evaluate(&mut env, 3, 500, |_, o| policy.act(o)).unwrap();
+    // no episodes: an error, not a report of zero means
+    let e = evaluate(&mut env, 0, 500, |_, o| policy.act(o))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("episodes = 0"), "{e}");
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let random = evaluate(&mut env, 3, 500, |_, _| {
         Ok(std::array::from_fn(|_| rng.random_range(-1.0..1.0)))

@@ -182,25 +182,39 @@ fn settings_out_of_range_are_refused() {
         )
     };
     let mut zero = |_: &Episode, _: &[f64], _: usize| Ok([0.0; 3]);
-    for bad in [
-        TransferConfig {
-            filter_window: 0,
-            ..TransferConfig::default()
-        },
-        TransferConfig {
-            command_rate_hz: f64::NAN,
-            ..TransferConfig::default()
-        },
-        TransferConfig {
-            disconnect: Some(Disconnect {
-                chamber: 3,
-                ..Disconnect::default()
-            }),
-            ..TransferConfig::default()
-        },
+    // each refusal names the setting and its value (chambers counted from 1, as on the
+    // command line)
+    for (bad, want) in [
+        (
+            TransferConfig {
+                filter_window: 0,
+                ..TransferConfig::default()
+            },
+            "filter window = 0",
+        ),
+        (
+            TransferConfig {
+                command_rate_hz: f64::NAN,
+                ..TransferConfig::default()
+            },
+            "command rate (Hz) = NaN",
+        ),
+        (
+            TransferConfig {
+                disconnect: Some(Disconnect {
+                    chamber: 3,
+                    ..Disconnect::default()
+                }),
+                ..TransferConfig::default()
+            },
+            "cut chamber = 4",
+        ),
     ] {
-        let e = evaluate_on_plant(&mut plant, &map, &r, &bad, 1, 0, &episode, &mut zero);
-        assert!(e.is_err(), "{bad:?} accepted");
+        let e = evaluate_on_plant(&mut plant, &map, &r, &bad, 1, 0, &episode, &mut zero)
+            .err()
+            .unwrap_or_else(|| panic!("{bad:?} accepted"))
+            .to_string();
+        assert!(e.contains(want), "{e}");
     }
     let mut nan = |_: &Episode, _: &[f64], _: usize| Ok([f64::NAN, 0.0, 0.0]);
     let e = evaluate_on_plant(

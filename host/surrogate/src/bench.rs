@@ -95,10 +95,26 @@ pub fn run_with_progress(
     }
 }
 
+/// Most worker threads a bench starts.
+const MAX_THREADS: usize = 1024;
+
 fn check(cfg: &BenchConfig) -> Result<rayon::ThreadPool> {
-    if cfg.envs == 0 || cfg.steps == 0 || cfg.threads == 0 || cfg.repeats == 0 {
+    for (name, v) in [
+        ("envs", cfg.envs),
+        ("steps", cfg.steps),
+        ("threads", cfg.threads),
+        ("repeats", cfg.repeats),
+    ] {
+        if v == 0 {
+            return Err(SurrogateError::Invalid(format!(
+                "bench {name} = 0: must be positive"
+            )));
+        }
+    }
+    if cfg.threads > MAX_THREADS {
         return Err(SurrogateError::Invalid(format!(
-            "bench sizes must be positive: {cfg:?}"
+            "bench threads = {}: at most {MAX_THREADS} (each is an operating-system thread)",
+            cfg.threads
         )));
     }
     rayon::ThreadPoolBuilder::new()

@@ -93,6 +93,40 @@ fn rot_y(a: f64) -> Matrix3<f64> {
 }
 
 impl ChainGeometry {
+    /// Refuses dimensions and masses the scene cannot be built from: every one finite, the
+    /// lengths, radii and link masses positive, the base height, TCP offset and dummy mass not
+    /// negative.
+    pub fn validate(&self) -> crate::error::Result<()> {
+        let positive = [
+            ("segment_length_m", self.segment_length_m),
+            ("link_radius_m", self.link_radius_m),
+            ("base_radius_m", self.base_radius_m),
+            ("top_radius_m", self.top_radius_m),
+            ("top_thickness_m", self.top_thickness_m),
+            ("link_mass_kg", self.link_mass_kg),
+        ];
+        let non_negative = [
+            ("base_height_m", self.base_height_m),
+            ("tcp_offset_m", self.tcp_offset_m),
+            ("dummy_mass_kg", self.dummy_mass_kg),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(crate::error::SurrogateError::Invalid(format!(
+                    "chain geometry: {name} = {v} must be finite and positive"
+                )));
+            }
+        }
+        for (name, v) in non_negative {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(crate::error::SurrogateError::Invalid(format!(
+                    "chain geometry: {name} = {v} must be finite and not negative"
+                )));
+            }
+        }
+        Ok(())
+    }
+
     /// The joint frames in chain order (each at the joint, after the joints below it) and the
     /// TCP frame last. A joint's axis is its frame's x, y or z column.
     pub fn joint_frames(&self, q: &Posture) -> ([Frame; N_JOINTS], Frame) {
@@ -232,6 +266,37 @@ mod tests {
             top_thickness_m: 0.02,
             link_mass_kg: 0.1,
             dummy_mass_kg: 1e-5,
+        }
+    }
+
+    #[test]
+    fn bad_dimensions_are_refused_by_name() {
+        geo().validate().unwrap();
+        for (g, name) in [
+            (
+                ChainGeometry {
+                    segment_length_m: -0.03,
+                    ..geo()
+                },
+                "segment_length_m = -0.03",
+            ),
+            (
+                ChainGeometry {
+                    link_radius_m: f64::NAN,
+                    ..geo()
+                },
+                "link_radius_m = NaN",
+            ),
+            (
+                ChainGeometry {
+                    base_height_m: -1e-3,
+                    ..geo()
+                },
+                "base_height_m = -0.001",
+            ),
+        ] {
+            let e = g.validate().unwrap_err().to_string();
+            assert!(e.contains(name), "{e}");
         }
     }
 

@@ -230,6 +230,10 @@ impl SurrogateModel {
             ));
         }
         m.limits.validate()?;
+        m.geometry
+            .chain
+            .validate()
+            .map_err(|e| SurrogateError::parse(&name, "geometry.chain", e.to_string()))?;
         Ok(m)
     }
 }

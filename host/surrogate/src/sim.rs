@@ -135,6 +135,7 @@ impl Sim {
     /// Builds the scene at the rest posture (projected onto the limits).
     pub fn new(chain: &ChainGeometry, limits: &Limits, config: SceneConfig) -> Result<Self> {
         limits.validate()?;
+        chain.validate()?;
         if !(config.dt_s > 0.0) || !config.dt_s.is_finite() {
             return Err(SurrogateError::Invalid(format!(
                 "time step {} s must be positive",

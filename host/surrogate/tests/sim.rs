@@ -281,3 +281,45 @@ fn batch_contact_matches_rapier_contact_force() {
         );
     }
 }
+
+#[test]
+fn bench_sizes_out_of_range_are_refused_by_name() {
+    use ocm_surrogate::bench::{BenchConfig, Engine, run};
+    let ok = BenchConfig {
+        engine: Engine::Batch,
+        envs: 2,
+        steps: 2,
+        threads: 1,
+        repeats: 1,
+        seed: 0,
+    };
+    for (cfg, want) in [
+        (BenchConfig { envs: 0, ..ok }, "envs = 0"),
+        (BenchConfig { repeats: 0, ..ok }, "repeats = 0"),
+        (
+            BenchConfig {
+                threads: 100_000,
+                ..ok
+            },
+            "threads = 100000",
+        ),
+    ] {
+        let e = run(&chain(), &Limits::default(), &cfg)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(want), "{e}");
+    }
+}
+
+#[test]
+fn a_chain_of_negative_length_is_refused_not_a_panic() {
+    let bad = ocm_surrogate::chain::ChainGeometry {
+        segment_length_m: -0.03,
+        ..chain()
+    };
+    let e = Sim::new(&bad, &Limits::default(), SceneConfig::default())
+        .err()
+        .expect("a negative segment length is refused")
+        .to_string();
+    assert!(e.contains("segment_length_m = -0.03"), "{e}");
+}

@@ -105,6 +105,10 @@ pub struct ContactGrid {
     pub z_min_m: f64,
 }
 
+/// Most points of a contact grid: a 1000 x 1000 raster, 25 um apart on the DIGIT's gel (ten
+/// times finer than its nodes), a few hundred MB per field.
+const MAX_GRID_POINTS: usize = 1_000_000;
+
 impl ContactGrid {
     /// The grid over `gel`'s top face with spacing `spacing_m`.
     pub fn for_gel(gel: &Gel, spacing_m: f64) -> Result<Self> {
@@ -114,11 +118,21 @@ impl ContactGrid {
             )));
         }
         let (lo, hi) = gel.top_bounds();
+        let (cols, rows) = (
+            ((hi[0] - lo[0]) / spacing_m).round().max(1.0),
+            ((hi[1] - lo[1]) / spacing_m).round().max(1.0),
+        );
+        if cols * rows > MAX_GRID_POINTS as f64 {
+            return Err(TactileError::Input(format!(
+                "contact grid spacing {:.3e} mm makes {cols} x {rows} points over the gel's top face, more than {MAX_GRID_POINTS}: use a coarser spacing (the gel's nodes are about 0.25 mm apart)",
+                spacing_m * 1e3
+            )));
+        }
         let grid = Grid {
             origin_m: lo,
             pixel_m: spacing_m,
-            cols: ((hi[0] - lo[0]) / spacing_m).round().max(1.0) as usize,
-            rows: ((hi[1] - lo[1]) / spacing_m).round().max(1.0) as usize,
+            cols: cols as usize,
+            rows: rows as usize,
         };
         let z: Vec<f64> = gel.mesh.points.iter().map(|p| p[2]).collect();
         let ones = vec![1.0; gel.num_nodes()];
@@ -1295,5 +1309,12 @@ mod tests {
         let gel = block();
         assert!(ContactGrid::for_gel(&gel, 0.0).is_err());
         assert!(ContactGrid::for_gel(&gel, f64::NAN).is_err());
+        // a spacing fine enough to overflow the raster's size is refused, naming it
+        for spacing_m in [1e-12, 1e-7] {
+            let e = ContactGrid::for_gel(&gel, spacing_m)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("more than 1000000"), "{e}");
+        }
     }
 }

@@ -32,19 +32,8 @@ impl GelMaterial {
     /// ratio strictly inside (-1, 0.5) (0.5 is incompressible, which the bulk term of eq 5.6
     /// cannot represent).
     pub fn validate(&self) -> Result<()> {
-        if !(self.young_pa.is_finite() && self.young_pa > 0.0) {
-            return Err(TactileError::Input(format!(
-                "the gel's Young's modulus must be a positive number, got {} Pa",
-                self.young_pa
-            )));
-        }
-        if !(self.poisson > -1.0 && self.poisson < 0.5) {
-            return Err(TactileError::Input(format!(
-                "the gel's Poisson's ratio must lie strictly between -1 and 0.5, got {}",
-                self.poisson
-            )));
-        }
-        Ok(())
+        ocm_fem::material::check_elastic(self.young_pa, self.poisson)
+            .map_err(|e| TactileError::Input(format!("the gel's {e}")))
     }
 
     /// The FEM law (eq 5.6).

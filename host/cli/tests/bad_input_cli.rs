@@ -1,0 +1,81 @@
+//! Counts out of range on the command line get an error naming the flag, before any file is
+//! read or any work is done (each used to crash, exhaust the memory or hang).
+
+use std::process::Command;
+
+/// Runs `ocm ARGS`, which must fail cleanly (an error, not a crash), and returns its stderr.
+fn fails(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
+        .args(args)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .expect("the ocm binary runs");
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(1), "ocm {args:?}: {err}");
+    assert!(!err.contains("panicked"), "ocm {args:?}: {err}");
+    err
+}
+
+#[test]
+fn learn_bench_refuses_an_empty_or_huge_batch() {
+    // --batch 0 reached the matrix kernels with zero-sized operands and crashed (SIGSEGV)
+    for batch in ["0", "1000000000000"] {
+        let e = fails(&[
+            "learn",
+            "bench",
+            "--forward",
+            "no-such.ckpt",
+            "--batch",
+            batch,
+        ]);
+        assert!(
+            e.contains(&format!(
+                "--batch must be between 1 and 1048576, got {batch}"
+            )),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn rl_refuses_zero_evaluation_episodes_before_training() {
+    // zero episodes left the plots an empty range, on which the axis search never ended
+    let e = fails(&[
+        "rl",
+        "eval",
+        "--model",
+        "no-such.json",
+        "--task",
+        "circle",
+        "--episodes",
+        "0",
+    ]);
+    assert!(e.contains("--episodes must be at least 1"), "{e}");
+    let e = fails(&[
+        "rl",
+        "train",
+        "--model",
+        "no-such.json",
+        "--task",
+        "circle",
+        "--eval-episodes",
+        "0",
+        "--out",
+        "no-such-dir",
+    ]);
+    assert!(e.contains("--eval-episodes must be at least 1"), "{e}");
+}
+
+#[test]
+fn ident_synth_refuses_a_row_count_beyond_its_cap() {
+    let out = std::env::temp_dir().join(format!("ocm-synth-{}.csv", std::process::id()));
+    let e = fails(&[
+        "ident",
+        "synth",
+        out.to_str().unwrap(),
+        "--rows",
+        "18446744073709551615",
+    ]);
+    assert!(e.contains("--rows must be between 100 and 1000000"), "{e}");
+    assert!(!out.exists());
+}
