@@ -210,6 +210,18 @@ fn rows3(basis: &DMatrix<f64>, node: usize, d: usize, k: usize) -> f64 {
     basis[(3 * node + d, k)]
 }
 
+/// An ECSW tolerance is a relative error of the training forces in [0, 1): 0 keeps every
+/// element (plain Galerkin), 1 would allow dropping them all.
+pub fn check_ecsw_tolerance(tolerance: f64) -> Result<()> {
+    if (0.0..1.0).contains(&tolerance) {
+        Ok(())
+    } else {
+        Err(MorError::Invalid(format!(
+            "ECSW tolerance {tolerance} must lie in [0, 1) (a relative error of the training forces; 0 = plain Galerkin)"
+        )))
+    }
+}
+
 impl ReducedModel {
     /// Plain Galerkin projection of `model` on `basis` (3N x r); the tip force acts on `tip_nodes`
     /// in equal parts.
@@ -613,12 +625,7 @@ impl ReducedModel {
     /// to `tolerance` (relative, each configuration scaled to unit force). Returns the reduced
     /// model keeping the elements with w_e > 0.
     pub fn hyper_reduce(&self, training: &[DVector<f64>], tolerance: f64) -> Result<EcswResult> {
-        // 0 keeps every element (plain Galerkin); 1 would allow dropping them all
-        if !(0.0..1.0).contains(&tolerance) {
-            return Err(MorError::Invalid(format!(
-                "ECSW tolerance {tolerance} must lie in [0, 1) (a relative error of the training forces)"
-            )));
-        }
+        check_ecsw_tolerance(tolerance)?;
         let r = self.rank();
         let ne = self.elements.len();
         let (blocks, skipped) = self.contributions(training);

@@ -346,6 +346,21 @@ fn flat3(v: &[[f64; 3]]) -> Vec<f64> {
     v.iter().flatten().copied().collect()
 }
 
+/// A nodal field of `nodes` x 3 values from an NPY file (`u_NNN.npy`, `f_NNN.npy`); another
+/// shape is an error naming the file (a cache of another mesh).
+pub(crate) fn read_nodal(p: &Path, nodes: usize) -> Result<Vec<[f64; 3]>> {
+    let a = ocm_fem::npy::read_f64_2d(p)?;
+    if a.rows != nodes || a.cols != 3 {
+        return Err(TactileError::Input(format!(
+            "{} is {} x {}, expected {nodes} x 3 (another mesh?)",
+            p.display(),
+            a.rows,
+            a.cols
+        )));
+    }
+    Ok(a.data.chunks(3).map(|c| [c[0], c[1], c[2]]).collect())
+}
+
 /// The FEM steps cached in `dir` (`u_NNN.npy`, `f_NNN.npy` over all mesh nodes, as `ocm tactile
 /// indent` writes them): the consecutive steps from 1 found there, at most `opts.steps`. The
 /// force on the indenter is minus the sum of the nodal contact forces (as the FEM reports it).
@@ -360,18 +375,7 @@ fn read_cache(dir: &Path, opts: &DatasetOptions, nodes: usize) -> Result<Vec<Ste
         if !(u.exists() && f.exists()) {
             break;
         }
-        let read = |p: &Path| -> Result<Vec<[f64; 3]>> {
-            let a = ocm_fem::npy::read_f64_2d(p)?;
-            if a.rows != nodes || a.cols != 3 {
-                return Err(TactileError::Input(format!(
-                    "{} is {} x {}, expected {nodes} x 3 (another mesh?)",
-                    p.display(),
-                    a.rows,
-                    a.cols
-                )));
-            }
-            Ok(a.data.chunks(3).map(|c| [c[0], c[1], c[2]]).collect())
-        };
+        let read = |p: &Path| read_nodal(p, nodes);
         let contact_force = read(&f)?;
         let mut total = [0.0; 3];
         for v in &contact_force {

@@ -55,19 +55,10 @@ impl FemSequence {
                     k + 2
                 )));
             }
-            let a = ocm_fem::npy::read_f64_2d(&p)?;
-            if a.rows != nodes || a.cols != 3 {
-                return Err(TactileError::Input(format!(
-                    "{} is {} x {}, expected {nodes} x 3 (another mesh?)",
-                    p.display(),
-                    a.rows,
-                    a.cols
-                )));
-            }
+            let u = crate::dataset::read_nodal(&p, nodes)?;
             seq.depth_m.push(cols[1] * 1e-3);
             seq.force_n.push([cols[2], cols[3], cols[4]]);
-            seq.displacement
-                .push(a.data.chunks(3).map(|c| [c[0], c[1], c[2]]).collect());
+            seq.displacement.push(u);
         }
         Ok(seq)
     }

@@ -11,6 +11,18 @@ use ocm_mor::pod::PodOptions;
 use ocm_mor::pod::Truncation;
 
 /// A 6 x 4 x 2 mm block of tets, base fixed, top at z = 2 mm.
+/// The `n` columns of the row-major `modes` are orthonormal.
+fn assert_orthonormal(modes: &[f64], n: usize) {
+    let rows = modes.len() / n;
+    for a in 0..n {
+        for b in 0..n {
+            let dot: f64 = (0..rows).map(|d| modes[d * n + a] * modes[d * n + b]).sum();
+            let want = if a == b { 1.0 } else { 0.0 };
+            assert!((dot - want).abs() < 1e-9, "columns {a}, {b}: {dot}");
+        }
+    }
+}
+
 fn block() -> Gel {
     let mesh = ocm_fem::mesh::generate::box_mesh([12, 8, 4], [6e-3, 4e-3, 2e-3]);
     Gel::from_mesh(mesh, GelMaterial::default(), 1e-9).unwrap()
@@ -328,16 +340,7 @@ fn reduced_solve_generalises_to_a_held_out_placement() {
     let n = em.rank();
     // The sphere's footprint is a few nodes wide, all of them on its rim: one new mode.
     assert_eq!(n, RANK_HELD_OUT + 1);
-    let rows = em.modes.len() / n;
-    for a in 0..n {
-        for b in 0..n {
-            let dot: f64 = (0..rows)
-                .map(|d| em.modes[d * n + a] * em.modes[d * n + b])
-                .sum();
-            let want = if a == b { 1.0 } else { 0.0 };
-            assert!((dot - want).abs() < 1e-9, "columns {a}, {b}: {dot}");
-        }
-    }
+    assert_orthonormal(&em.modes, n);
     let k_direct = reduced_stiffness(&gel, &em.modes, n).unwrap();
     let scale = k_direct.abs().max();
     assert!(
@@ -526,16 +529,7 @@ fn footprint_loads_follow_the_indenter_geometry() {
             "{label}: {miss} of {size} outside the basis"
         );
     }
-    let rows = em.modes.len() / n;
-    for a in 0..n {
-        for b in 0..n {
-            let dot: f64 = (0..rows)
-                .map(|d| em.modes[d * n + a] * em.modes[d * n + b])
-                .sum();
-            let want = if a == b { 1.0 } else { 0.0 };
-            assert!((dot - want).abs() < 1e-9, "columns {a}, {b}: {dot}");
-        }
-    }
+    assert_orthonormal(&em.modes, n);
     let k_direct = reduced_stiffness(&gel, &em.modes, n).unwrap();
     assert!((&k_direct - &em.stiffness).abs().max() < 1e-9 * k_direct.abs().max());
     // The second-order mode of the footprint load is a new direction, orthogonal to the
