@@ -139,7 +139,7 @@ pub struct EvalArgs {
     #[command(flatten)]
     pub data: DataArgs,
     /// Length of the free-running rollouts, s.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, value_parser = crate::arg_check::positive, default_value_t = 1.0)]
     pub horizon_s: f64,
     /// Write prediction-against-truth plots (CSV, PNG, SVG) into this folder.
     #[arg(long)]

@@ -33,7 +33,7 @@ pub enum MorCommand {
         #[arg(long, default_value_t = 2)]
         held_out: usize,
         /// Steps per sequence (dt = 0.01 s).
-        #[arg(long, default_value_t = 100)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 100)]
         steps: usize,
         /// Seed of the inputs.
         #[arg(long, default_value_t = 1)]
@@ -103,7 +103,7 @@ pub enum MorCommand {
         #[arg(long, default_value_t = 1e-3)]
         tolerance: f64,
         /// Use every k-th training snapshot for ECSW.
-        #[arg(long, default_value_t = 10)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 10)]
         every: usize,
         /// Output folder for ecsw.npy and rom.json, or opinf.npy and opinf.json (default: the
         /// basis folder).
@@ -134,7 +134,7 @@ pub enum MorCommand {
         #[arg(long, value_delimiter = ',', default_value = "1e-2,1e-3")]
         tolerances: Vec<f64>,
         /// Use every k-th training snapshot for ECSW.
-        #[arg(long, default_value_t = 5)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 5)]
         every: usize,
         /// Full-FEM steps re-timed in this run (first held-out sequence; 0 = all of it).
         #[arg(long, default_value_t = 0)]

@@ -52,7 +52,7 @@ pub enum NpeCommand {
         val_setups: usize,
         /// Weight of the resultant term of the loss: squared error of the summed nodal force,
         /// N^2 (0: eq 6.17 alone).
-        #[arg(long, default_value_t = 0.0)]
+        #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 0.0)]
         lambda_total: f64,
         /// Contact prior on the readout: nodal force only at penetrated nodes and their
         /// neighbours, vertical displacement as a correction to minus the penetration.
@@ -118,10 +118,10 @@ pub enum NpeCommand {
         #[arg(long, default_value = "out/npe/dataset")]
         dataset: PathBuf,
         /// Timed calls.
-        #[arg(long, default_value_t = 200)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 200)]
         calls: usize,
         /// Worker threads.
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 1)]
         threads: usize,
         /// Print JSON.
         #[arg(long)]

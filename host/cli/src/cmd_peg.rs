@@ -112,7 +112,7 @@ pub enum PegCommand {
         #[arg(long)]
         images: bool,
         /// Render every N-th frame (and the last).
-        #[arg(long, default_value_t = 1)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 1)]
         every: usize,
         /// Gel mesh the engine was trained on (in the data folder's digit/).
         #[arg(long, default_value = "DIGIT_v8.vtk")]

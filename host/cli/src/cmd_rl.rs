@@ -92,10 +92,10 @@ pub enum RlCommand {
         #[arg(long, default_value_t = 10_000)]
         steps: usize,
         /// PPO and SAC: parallel environments.
-        #[arg(long, default_value_t = 8)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 8)]
         envs: usize,
         /// Threads.
-        #[arg(long, default_value_t = 2)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 2)]
         threads: usize,
         /// Evaluation episodes of 100 points after training.
         #[arg(long, default_value_t = 5)]
@@ -197,16 +197,16 @@ pub enum RlCommand {
         #[arg(long)]
         policy: Option<PathBuf>,
         /// Environments of the vector run.
-        #[arg(long, default_value_t = 16)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 16)]
         envs: usize,
         /// Threads of the vector run.
-        #[arg(long, default_value_t = 2)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 2)]
         threads: usize,
         /// Control steps per environment and repeat.
-        #[arg(long, default_value_t = 200)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 200)]
         steps: usize,
         /// Repeats.
-        #[arg(long, default_value_t = 5)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 5)]
         repeats: usize,
         /// Print JSON.
         #[arg(long)]

@@ -48,7 +48,7 @@ pub enum TactileCommand {
         #[arg(long, value_enum, default_value = "fine")]
         mesh: MeshArg,
         /// Number of depth steps.
-        #[arg(long, default_value_t = 100)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 100)]
         steps: usize,
         /// Depth step, um.
         #[arg(long, default_value_t = 10.0)]
@@ -63,7 +63,7 @@ pub enum TactileCommand {
         #[arg(long, default_value_t = 0.45)]
         poisson: f64,
         /// Write a VTK file every this many steps (0: none; the last step always).
-        #[arg(long, default_value_t = 10)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 10)]
         vtk_every: usize,
         /// Output folder.
         #[arg(long, default_value = "tactile-out")]
@@ -98,7 +98,7 @@ pub enum TactileCommand {
         #[arg(long)]
         map: Option<PathBuf>,
         /// Render every this many steps (and the last).
-        #[arg(long, default_value_t = 10)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 10)]
         every: usize,
         /// Output folder for render_NNN.png.
         #[arg(long, default_value = "render-out")]
@@ -107,7 +107,7 @@ pub enum TactileCommand {
         #[arg(long)]
         bench: Option<usize>,
         /// Worker threads (rendering and benchmark).
-        #[arg(long, default_value_t = 2)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 2)]
         threads: usize,
         /// Print a JSON summary.
         #[arg(long)]
@@ -133,7 +133,7 @@ pub enum TactileCommand {
         #[arg(long, default_value = "out/tactile/edge6-fem")]
         fem: PathBuf,
         /// FEM steps of 10 um.
-        #[arg(long, default_value_t = 100)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 100)]
         steps: usize,
         /// Mask threshold: mean |frame - background| over R, G, B after a 5 x 5 box blur,
         /// grey levels.
@@ -166,7 +166,7 @@ pub enum TactileCommand {
         #[arg(long, value_enum, default_value = "fine")]
         mesh: MeshArg,
         /// Depth steps (all saved).
-        #[arg(long, default_value_t = 20)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 20)]
         steps: usize,
         /// Depth step, um.
         #[arg(long, default_value_t = 50.0)]
@@ -204,7 +204,7 @@ pub enum TactileCommand {
         #[arg(long, default_value = "out/tactile/rom")]
         rom: PathBuf,
         /// Threads of the reduced model's signed-distance queries.
-        #[arg(long, default_value_t = 2)]
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 2)]
         threads: usize,
         /// With --model reduced: grow the basis of each set-up by its two footprint modes (the
         /// rest stiffness' responses to normal loads on the indenter's footprint and its rim).
@@ -445,6 +445,12 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             out,
             json,
         } => {
+            if random_only && random == 0 {
+                bail!(
+                    "--random-only keeps only the random placements, and --random is 0: give \
+                     --random N (N > 0), or drop --random-only"
+                );
+            }
             let digit = ocm_datadir::data_file(data.as_deref(), "digit")?;
             let mesh_file = match mesh {
                 MeshArg::Fine => "DIGIT_v8.vtk",
@@ -1101,7 +1107,7 @@ pub struct ReduceArgs {
     #[arg(long, default_value_t = 0)]
     updates: usize,
     /// Threads for the signed-distance queries.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, value_parser = crate::arg_check::count, default_value_t = 2)]
     threads: usize,
     /// Add two modes per placement to the basis (the rest stiffness' responses to a normal
     /// load on the indenter's footprint and on its rim), built inside each timed run.
@@ -1135,7 +1141,7 @@ pub struct ReduceArgs {
     #[arg(long)]
     hold_mean_gap: bool,
     /// Timed repeats of each held-out sequence.
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, value_parser = crate::arg_check::count, default_value_t = 5)]
     repeats: usize,
     /// Print JSON.
     #[arg(long)]

@@ -108,7 +108,7 @@ pub struct TrainNetArgs {
     #[arg(long, requires = "force")]
     pub force_stuck: bool,
     /// With --force: score every K-th held-out sample only (the solves take seconds each).
-    #[arg(long, requires = "force", default_value_t = 1)]
+    #[arg(long, requires = "force", value_parser = crate::arg_check::count, default_value_t = 1)]
     pub force_every: usize,
     /// With --score-only on a perception checkpoint: the surface force of every held-out
     /// sample through the gel's linear top-face compliance (seconds; the quantity the

@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 
+mod arg_check;
 mod cmd_fem;
 mod cmd_ident;
 mod cmd_learn;

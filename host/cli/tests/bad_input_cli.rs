@@ -79,3 +79,56 @@ fn ident_synth_refuses_a_row_count_beyond_its_cap() {
     assert!(e.contains("--rows must be between 100 and 1000000"), "{e}");
     assert!(!out.exists());
 }
+
+/// Runs `ocm ARGS`, which clap must refuse as a usage error (exit code 2) naming `flag`.
+fn refused_flag(args: &[&str], flag: &str, why: &str) {
+    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
+        .args(args)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .expect("the ocm binary runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "ocm {args:?}: {err}");
+    assert!(
+        err.contains("invalid value") && err.contains(flag) && err.contains(why),
+        "ocm {args:?}: {err}"
+    );
+}
+
+#[test]
+fn zero_counts_and_non_finite_numbers_are_refused_naming_the_flag() {
+    // each of these ran to an empty "successful" result, or was clamped silently
+    for (args, flag) in [
+        (&["mor", "snapshots", "--steps", "0"][..], "--steps"),
+        (&["mor", "reduce", "--every", "0"], "--every"),
+        (&["rl", "bench", "--repeats", "0"], "--repeats"),
+        (&["rl", "bench", "--envs", "0"], "--envs"),
+        (&["tactile", "dataset", "--threads", "0"], "--threads"),
+        (&["peg", "replay", "--every", "0"], "--every"),
+        (&["npe", "bench", "--calls", "0"], "--calls"),
+    ] {
+        refused_flag(args, flag, "must be at least 1");
+    }
+    refused_flag(
+        &["learn", "eval", "--horizon-s", "nan"],
+        "--horizon-s",
+        "finite",
+    );
+    refused_flag(
+        &["npe", "train", "--lambda-total=-1"],
+        "--lambda-total",
+        "must be 0 or more",
+    );
+}
+
+#[test]
+fn a_dataset_of_only_random_placements_needs_some() {
+    let e = fails(&[
+        "tactile",
+        "dataset",
+        "--random-only",
+        "--out",
+        "no-such-dir",
+    ]);
+    assert!(e.contains("--random is 0"), "{e}");
+}

@@ -15,17 +15,37 @@ pub fn segments(starts: &[usize], n: usize) -> Vec<(usize, usize)> {
 
 /// First-order low-pass with time constant `tau_s` (exact discretisation for held input).
 pub fn lowpass(x: &[f64], time_s: &[f64], starts: &[usize], tau_s: f64) -> Vec<f64> {
+    lowpass_with(x, starts, &lowpass_factors(time_s, tau_s))
+}
+
+/// The per-row factors `exp(-dt_i / tau_s)` of [`lowpass`] (0 for `tau_s <= 0`; the first
+/// row's is unused), for filtering many signals of one record at one time constant.
+pub fn lowpass_factors(time_s: &[f64], tau_s: f64) -> Vec<f64> {
+    let mut a = vec![0.0; time_s.len()];
+    if tau_s > 0.0 {
+        // Records are sampled evenly: the exponential of a repeated step is reused (the same
+        // value it would give again; it dominated the identification's time).
+        let (mut last_dt, mut last_a) = (f64::NAN, 0.0);
+        for i in 1..time_s.len() {
+            let dt = (time_s[i] - time_s[i - 1]).max(0.0);
+            if dt != last_dt {
+                last_a = (-dt / tau_s).exp();
+                last_dt = dt;
+            }
+            a[i] = last_a;
+        }
+    }
+    a
+}
+
+/// [`lowpass`] with its factors computed by [`lowpass_factors`].
+pub fn lowpass_with(x: &[f64], starts: &[usize], factors: &[f64]) -> Vec<f64> {
     let mut y = vec![0.0; x.len()];
     for (s, e) in segments(starts, x.len()) {
         let mut state = x[s];
         y[s] = state;
         for i in s + 1..e {
-            let dt = (time_s[i] - time_s[i - 1]).max(0.0);
-            let a = if tau_s > 0.0 {
-                (-dt / tau_s).exp()
-            } else {
-                0.0
-            };
+            let a = factors[i];
             state = a * state + (1.0 - a) * x[i];
             y[i] = state;
         }
@@ -74,9 +94,9 @@ pub fn laguerre(x: &[f64], starts: &[usize], pole: f64, count: usize) -> Vec<Vec
 pub fn delay_samples(x: &[f64], starts: &[usize], delay: usize) -> Vec<f64> {
     let mut y = vec![0.0; x.len()];
     for (s, e) in segments(starts, x.len()) {
-        for i in s..e {
-            y[i] = x[i.saturating_sub(delay).max(s)];
-        }
+        let held = s.saturating_add(delay).min(e);
+        y[s..held].fill(x[s]);
+        y[held..e].copy_from_slice(&x[s..e - (held - s)]);
     }
     y
 }
@@ -293,6 +313,42 @@ mod tests {
         assert_eq!(d, vec![0.0, 0.0, 5.0, 10.0, 10.0]);
         let p = play(&x, &[0, 3], 1.0);
         assert_eq!(p[3], 10.0);
+    }
+
+    /// The fast paths (a reused step factor, block copies) against the definitions, on
+    /// uneven steps, repeated steps, short segments and delays longer than a segment.
+    #[test]
+    fn fast_operators_equal_their_definitions() {
+        let t: Vec<f64> = (0..60)
+            .map(|i| i as f64 * 0.01 + if i % 7 == 0 { 0.003 } else { 0.0 })
+            .collect();
+        let x: Vec<f64> = (0..60).map(|i| ((i * 37) % 11) as f64 - 5.0).collect();
+        let starts = [0, 1, 9, 10, 31];
+        for tau in [0.0, 0.02, 0.5] {
+            let y = lowpass(&x, &t, &starts, tau);
+            for (s, e) in segments(&starts, x.len()) {
+                let mut state = x[s];
+                assert_eq!(y[s], state);
+                for i in s + 1..e {
+                    let dt = (t[i] - t[i - 1]).max(0.0);
+                    let a = if tau > 0.0 { (-dt / tau).exp() } else { 0.0 };
+                    state = a * state + (1.0 - a) * x[i];
+                    assert_eq!(y[i].to_bits(), state.to_bits(), "tau {tau}, row {i}");
+                }
+            }
+        }
+        for delay in [0, 1, 3, 25, usize::MAX] {
+            let y = delay_samples(&x, &starts, delay);
+            for (s, e) in segments(&starts, x.len()) {
+                for i in s..e {
+                    assert_eq!(
+                        y[i],
+                        x[i.saturating_sub(delay).max(s)],
+                        "delay {delay}, row {i}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

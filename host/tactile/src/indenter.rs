@@ -2,8 +2,9 @@
 
 use crate::{Result, TactileError};
 use nalgebra::{Matrix3, Rotation3, Vector3};
-// parry links its own nalgebra (0.34); its points are converted at this boundary.
-use parry3d_f64::math::Point as PPoint;
+// parry speaks glam (through rapier's version, one parry in the build); its points are
+// converted at this boundary.
+use parry3d_f64::math::Vector as PVec;
 use parry3d_f64::query::PointQuery;
 use parry3d_f64::shape::{FeatureId, TriMesh, TriMeshFlags};
 use std::path::Path;
@@ -108,10 +109,7 @@ impl Indenter {
                 hi[k] = hi[k].max(p[k]);
             }
         }
-        let verts: Vec<PPoint<f64>> = points
-            .iter()
-            .map(|p| PPoint::new(p[0], p[1], p[2]))
-            .collect();
+        let verts: Vec<PVec> = points.iter().map(|p| PVec::new(p[0], p[1], p[2])).collect();
         let idx: Vec<[u32; 3]> = triangles.iter().map(|t| t.map(|i| i as u32)).collect();
         let mesh = TriMesh::with_flags(verts, idx, TriMeshFlags::ORIENTED)
             .map_err(|e| err(format!("cannot build the triangle mesh: {e:?}")))?;
@@ -127,7 +125,7 @@ impl Indenter {
     pub fn query_local(&self, p: &Vector3<f64>) -> Proximity {
         let (proj, feature) = self
             .mesh
-            .project_local_point_and_get_feature(&PPoint::new(p.x, p.y, p.z));
+            .project_local_point_and_get_feature(PVec::new(p.x, p.y, p.z));
         let d = p - Vector3::new(proj.point.x, proj.point.y, proj.point.z);
         let dist = d.norm();
         let sign = if proj.is_inside { -1.0 } else { 1.0 };
@@ -136,9 +134,11 @@ impl Indenter {
             d * (sign / dist)
         } else {
             match feature {
-                FeatureId::Face(f) => self
+                // the face id is the triangle's own (front or back); the mesh's triangle is
+                // the projection's sub-shape
+                FeatureId::Face(_) => self
                     .mesh
-                    .triangle(f % self.mesh.indices().len() as u32)
+                    .triangle(proj.subshape % self.mesh.indices().len() as u32)
                     .normal()
                     .map(|n| Vector3::new(n.x, n.y, n.z))
                     .unwrap_or_else(Vector3::z),
@@ -182,8 +182,8 @@ impl Indenter {
     pub fn ray_local(&self, origin: &Vector3<f64>, dir: &Vector3<f64>, max_m: f64) -> Option<f64> {
         use parry3d_f64::query::{Ray, RayCast};
         let ray = Ray::new(
-            PPoint::new(origin.x, origin.y, origin.z),
-            parry3d_f64::math::Vector::new(dir.x, dir.y, dir.z),
+            PVec::new(origin.x, origin.y, origin.z),
+            PVec::new(dir.x, dir.y, dir.z),
         );
         self.mesh.cast_local_ray(&ray, max_m, true)
     }

@@ -189,7 +189,7 @@ impl Prepared<'_> {
             .collect();
         // Latency acts on the whole model output: a fractional dead time (linear
         // interpolation between samples) followed by a first-order lag.
-        let lag = |x: &[f64], d: f64, tau: f64| -> Vec<f64> {
+        let lag = |x: &[f64], d: f64, tau: f64, factors: &[f64]| -> Vec<f64> {
             let delayed = if d > 0.0 {
                 let whole = d.floor() as usize;
                 let frac = d - d.floor();
@@ -207,7 +207,7 @@ impl Prepared<'_> {
                 x.to_vec()
             };
             if tau > 0.0 {
-                signal::lowpass(&delayed, &rec.time_s, starts, tau)
+                signal::lowpass_with(&delayed, starts, factors)
             } else {
                 delayed
             }
@@ -217,9 +217,21 @@ impl Prepared<'_> {
         let feats = &feats;
         let fit_at = |d: f64, tau: f64| -> ChannelFits {
             let mut out = Vec::new();
+            // one set of low-pass factors for every column of every channel
+            let factors = if tau > 0.0 {
+                signal::lowpass_factors(&rec.time_s, tau)
+            } else {
+                Vec::new()
+            };
             for (c, ch) in channels.iter().enumerate() {
                 let shift = d > 0.0 || tau > 0.0;
-                let tr = |x: &Vec<f64>| if shift { lag(x, d, tau) } else { x.clone() };
+                let tr = |x: &Vec<f64>| {
+                    if shift {
+                        lag(x, d, tau, &factors)
+                    } else {
+                        x.clone()
+                    }
+                };
                 let fixed = tr(&ch.design.fixed);
                 let base: Vec<Vec<f64>> = ch.design.regressors.iter().map(tr).collect();
                 let ext: Vec<Vec<f64>> = if shift {
