@@ -456,10 +456,13 @@ pub fn run(cmd: FemCommand) -> anyhow::Result<()> {
                 .map(|s| {
                     let v: Vec<f64> = s
                         .split(':')
-                        .map(|t| t.trim().parse::<f64>())
-                        .collect::<Result<_, _>>()?;
+                        .map(|t| t.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+                        .collect::<Option<_>>()
+                        .with_context(|| {
+                            format!("--states: '{s}' must be three finite pressures p1:p2:p3, kPa")
+                        })?;
                     if v.len() != 3 {
-                        bail!("state '{s}' must be p1:p2:p3");
+                        bail!("--states: '{s}' must be three pressures p1:p2:p3, kPa");
                     }
                     Ok([v[0], v[1], v[2]])
                 })

@@ -830,7 +830,12 @@ fn parse_shard(s: &str) -> anyhow::Result<(usize, usize)> {
     let (a, b) = s
         .split_once('/')
         .with_context(|| format!("--shard '{s}' must be I/N, e.g. 0/4"))?;
-    let (i, n): (usize, usize) = (a.trim().parse()?, b.trim().parse()?);
+    let whole = |t: &str| -> anyhow::Result<usize> {
+        t.trim()
+            .parse()
+            .with_context(|| format!("--shard '{s}' must be I/N with whole numbers, e.g. 0/4"))
+    };
+    let (i, n) = (whole(a)?, whole(b)?);
     if n == 0 || i >= n {
         bail!("--shard {i}/{n}: I must be below N");
     }

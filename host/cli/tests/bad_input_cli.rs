@@ -132,3 +132,29 @@ fn a_dataset_of_only_random_placements_needs_some() {
     ]);
     assert!(e.contains("--random is 0"), "{e}");
 }
+
+#[test]
+fn malformed_shards_and_states_name_their_flag() {
+    for shard in ["x/4", "1/y", "3"] {
+        let e = fails(&[
+            "mor",
+            "dataset",
+            "--model",
+            "full",
+            "--samples",
+            "10",
+            "--shard",
+            shard,
+            "--out",
+            "no-such-dir",
+        ]);
+        assert!(e.contains(&format!("--shard '{shard}' must be I/N")), "{e}");
+    }
+    for state in ["1:2", "1:x:3", "1:nan:3"] {
+        let e = fails(&["fem", "calibrate", "grid", "--states", state]);
+        assert!(
+            e.contains(&format!("--states: '{state}' must be three")),
+            "{e}"
+        );
+    }
+}

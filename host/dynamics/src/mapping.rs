@@ -201,14 +201,7 @@ impl TrainedMap {
             path: path.to_path_buf(),
             reason,
         };
-        if ck.header.architecture != ARCHITECTURE {
-            return Err(mismatch(format!(
-                "holds a '{}' model, expected '{ARCHITECTURE}'",
-                ck.header.architecture
-            ))
-            .into());
-        }
-        let config: MapConfig = ck.config()?;
+        let config: MapConfig = ck.config_of(&[ARCHITECTURE])?;
         let model = ck.load_into(config.mlp().init(&cpu(), 0), ARCHITECTURE, &config)?;
         let meta: MapMeta = serde_json::from_value(ck.header.meta.clone())
             .map_err(|e| mismatch(format!("run facts do not decode: {e}")))?;

@@ -269,18 +269,7 @@ impl TrainedForward {
     /// Reads a checkpoint written by [`TrainedForward::save`].
     pub fn load(path: &Path) -> Result<Self> {
         let ck = Checkpoint::read(path)?;
-        if ck.header.architecture != forward::ARCHITECTURE {
-            return Err(ocm_learn::LearnError::CheckpointMismatch {
-                path: path.to_path_buf(),
-                reason: format!(
-                    "holds a '{}' model, expected '{}'",
-                    ck.header.architecture,
-                    forward::ARCHITECTURE
-                ),
-            }
-            .into());
-        }
-        let config: ForwardConfig = ck.config()?;
+        let config: ForwardConfig = ck.config_of(&[forward::ARCHITECTURE])?;
         let model = ck.load_into(config.init(&cpu(), 0), forward::ARCHITECTURE, &config)?;
         let (scalers, meta) = read_parts(&ck)?;
         Ok(Self {
@@ -307,18 +296,7 @@ impl TrainedInverse {
     /// Reads a checkpoint written by [`TrainedInverse::save`].
     pub fn load(path: &Path) -> Result<Self> {
         let ck = Checkpoint::read(path)?;
-        if ck.header.architecture != inverse::ARCHITECTURE {
-            return Err(ocm_learn::LearnError::CheckpointMismatch {
-                path: path.to_path_buf(),
-                reason: format!(
-                    "holds a '{}' model, expected '{}'",
-                    ck.header.architecture,
-                    inverse::ARCHITECTURE
-                ),
-            }
-            .into());
-        }
-        let config: InverseConfig = ck.config()?;
+        let config: InverseConfig = ck.config_of(&[inverse::ARCHITECTURE])?;
         let model = ck.load_into(config.init(&cpu(), 0), inverse::ARCHITECTURE, &config)?;
         let (scalers, meta) = read_parts(&ck)?;
         Ok(Self {

@@ -192,9 +192,14 @@ pub fn grid_search(
     mut error: impl FnMut(f64, f64) -> Result<f64>,
 ) -> Result<(Vec<GridCell>, GridCell)> {
     let mut cells = vec![];
+    // the first failure, so that a grid on which nothing solves says why
+    let mut first_failure: Option<String> = None;
     for &e in youngs_pa {
         for &nu in poissons {
-            let err = error(e, nu).unwrap_or(f64::NAN);
+            let err = error(e, nu).unwrap_or_else(|why| {
+                first_failure.get_or_insert_with(|| format!("E = {e:e} Pa, nu = {nu}: {why}"));
+                f64::NAN
+            });
             cells.push(GridCell {
                 young_pa: e,
                 poisson: nu,
@@ -207,7 +212,15 @@ pub fn grid_search(
         .filter(|c| c.error.is_finite())
         .min_by(|a, b| a.error.total_cmp(&b.error))
         .cloned()
-        .ok_or_else(|| FemError::Model("every grid point failed".into()))?;
+        .ok_or_else(|| {
+            FemError::Model(format!(
+                "every one of the {} grid points failed; the first, {}",
+                cells.len(),
+                first_failure
+                    .as_deref()
+                    .unwrap_or("gave a non-finite error")
+            ))
+        })?;
     Ok((cells, best))
 }
 
@@ -261,5 +274,16 @@ mod tests {
         assert_eq!(cells.len(), 9);
         assert_eq!((best.young_pa, best.poisson), (2.0, 0.4));
         assert!(cells.iter().filter(|c| c.error.is_nan()).count() == 3);
+        // nothing solves: the error counts the points and says why the first failed
+        let e = grid_search(&es, &nus, |e, _| {
+            Err(FemError::Model(format!("diverged at {e}")))
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("every one of the 9 grid points failed")
+                && e.contains("E = 1e0 Pa, nu = 0.3: invalid model: diverged at 1"),
+            "{e}"
+        );
     }
 }

@@ -15,6 +15,14 @@ pub enum FemError {
         /// What is wrong.
         msg: String,
     },
+    /// A file's contents are unusable; `source` says what and where inside it.
+    #[error("{path}: {source}")]
+    File {
+        /// The file.
+        path: String,
+        /// What is wrong in it.
+        source: Box<FemError>,
+    },
     /// Reading or writing a file failed.
     #[error("I/O error on {path}: {source}")]
     Io {
@@ -57,6 +65,14 @@ pub enum FemError {
 pub type Result<T> = std::result::Result<T, FemError>;
 
 impl FemError {
+    /// This error, said of the file `path` (a reader's error names the line, this the file).
+    pub fn in_file(self, path: &std::path::Path) -> Self {
+        FemError::File {
+            path: path.display().to_string(),
+            source: Box::new(self),
+        }
+    }
+
     /// Builds a parse error.
     pub fn parse(file: &'static str, at: impl Into<String>, msg: impl Into<String>) -> Self {
         FemError::Parse {

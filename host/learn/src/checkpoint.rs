@@ -222,6 +222,27 @@ impl Checkpoint {
         })
     }
 
+    /// [`Self::config`], once the checkpoint is known to hold one of `architectures`: a file of
+    /// another kind (an RL policy given where an NPE is expected) is named as that, not as a
+    /// configuration that does not decode.
+    pub fn config_of<C: serde::de::DeserializeOwned>(&self, architectures: &[&str]) -> Result<C> {
+        if !architectures.contains(&self.header.architecture.as_str()) {
+            return Err(LearnError::CheckpointMismatch {
+                path: self.path.clone(),
+                reason: format!(
+                    "holds a '{}' model, expected {}",
+                    self.header.architecture,
+                    architectures
+                        .iter()
+                        .map(|a| format!("'{a}'"))
+                        .collect::<Vec<_>>()
+                        .join(" or ")
+                ),
+            });
+        }
+        self.config()
+    }
+
     /// The scaler stored under `role`.
     pub fn scaler(&self, role: &str) -> Result<&Standardizer> {
         self.header

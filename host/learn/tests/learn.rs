@@ -283,6 +283,15 @@ fn corrupt_or_mismatched_checkpoints_are_refused() {
     );
     // Same configuration claimed, different network: the shape check catches it.
     assert!(mismatch(ck.load_into(wider.init(&cpu(), 1), "test/mlp", &cfg)).contains("shapes"));
+    // A checkpoint of another kind is named as such before its configuration is decoded.
+    match ck.config_of::<MlpConfig>(&["test/npe", "test/unet"]) {
+        Err(LearnError::CheckpointMismatch { reason, .. }) => assert_eq!(
+            reason,
+            "holds a 'test/mlp' model, expected 'test/npe' or 'test/unet'"
+        ),
+        other => panic!("expected a mismatch, got {other:?}"),
+    }
+    assert_eq!(ck.config_of::<MlpConfig>(&["test/mlp"]).unwrap(), cfg);
     let missing = Checkpoint::read(&dir.join("absent.ckpt"));
     assert!(matches!(missing, Err(LearnError::Io { .. })));
     std::fs::remove_dir_all(&dir).ok();

@@ -151,7 +151,7 @@ impl Npe {
     /// Reads an engine written by [`Npe::save`] (`ocm npe train`).
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
         let ck = Checkpoint::read(path.as_ref())?;
-        let config: NpeConfig = ck.config()?;
+        let config: NpeConfig = ck.config_of(&[ARCHITECTURE])?;
         let surface: Surface =
             serde_json::from_value(ck.header.meta["surface"].clone()).map_err(|e| {
                 NpeError::Data(format!(

@@ -193,7 +193,7 @@ impl BcPolicy {
     /// Reads a checkpoint written by [`BcPolicy::save`].
     pub fn load(path: &Path) -> Result<Self> {
         let ck = Checkpoint::read(path)?;
-        let config: MlpConfig = ck.config()?;
+        let config: MlpConfig = ck.config_of(&[ARCHITECTURE])?;
         let meta: PolicyMeta = serde_json::from_value(ck.header.meta.clone())
             .map_err(|e| PegError::file(path, format!("policy meta: {e}")))?;
         let obs_scaler = ck.scaler("obs")?.clone();

@@ -223,7 +223,7 @@ impl Policy {
     /// Reads a policy written by [`Policy::save`] and its facts.
     pub fn load(path: &Path) -> Result<(Self, PolicyMeta)> {
         let ck = Checkpoint::read(path)?;
-        let config: MlpConfig = ck.config()?;
+        let config: MlpConfig = ck.config_of(&[ARCHITECTURE])?;
         if config.input != OBS_DIM || (config.output != ACT_DIM && config.output != 2 * ACT_DIM) {
             return Err(RlError::Invalid(format!(
                 "{}: policy maps {} -> {} values, the environments {OBS_DIM} -> {ACT_DIM}",

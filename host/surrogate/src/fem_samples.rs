@@ -277,6 +277,54 @@ impl FemSamples {
                 format!("expected {FORMAT}, found {}", self.format),
             ));
         }
+        // sizes and the mass must be positive: a negative one builds a chain of negative
+        // length or an inertia of the wrong sign far from this file
+        for (field, v) in [
+            ("fem_mass_kg", self.fem_mass_kg),
+            ("base_radius_m", self.base_radius_m),
+            ("top_radius_m", self.top_radius_m),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(SurrogateError::parse(
+                    name,
+                    field,
+                    format!("{v} must be a finite value above 0"),
+                ));
+            }
+        }
+        for (field, v) in [
+            ("rigid_base_top_m", self.rigid_base_top_m),
+            ("rigid_top_bottom_m", self.rigid_top_bottom_m),
+            ("top_face_m", self.top_face_m),
+            ("tcp_offset_m", self.tcp_offset_m),
+        ] {
+            if !v.is_finite() {
+                return Err(SurrogateError::parse(
+                    name,
+                    field,
+                    format!("{v} is not finite"),
+                ));
+            }
+        }
+        if self.tcp_offset_m < 0.0 {
+            return Err(SurrogateError::parse(
+                name,
+                "tcp_offset_m",
+                format!("{} m: the TCP lies above the top face", self.tcp_offset_m),
+            ));
+        }
+        if !(self.rigid_base_top_m < self.rigid_top_bottom_m
+            && self.rigid_top_bottom_m <= self.top_face_m)
+        {
+            return Err(SurrogateError::parse(
+                name,
+                "rigid_base_top_m",
+                format!(
+                    "heights base top {} m, top frame bottom {} m, top face {} m must rise in that order",
+                    self.rigid_base_top_m, self.rigid_top_bottom_m, self.top_face_m
+                ),
+            ));
+        }
         let nl = self.layers.nodes.len();
         let all = std::iter::once(("rest".to_string(), &self.rest))
             .chain(
@@ -312,6 +360,13 @@ impl FemSamples {
                     .all(|v| v.is_finite());
             if !finite {
                 return Err(SurrogateError::parse(name, at, "non-finite value"));
+            }
+            if s.arc_length_m <= 0.0 {
+                return Err(SurrogateError::parse(
+                    name,
+                    at,
+                    format!("arc length {} m must be above 0", s.arc_length_m),
+                ));
             }
         }
         Ok(())

@@ -49,6 +49,27 @@ fn surrogate_from_a_small_fem_sweep() {
     std::fs::create_dir_all(&dir).unwrap();
     s.write(&dir.join("samples.json")).unwrap();
     let s2 = FemSamples::read(&dir.join("samples.json")).unwrap();
+    // A negative size or mass is named on reading, not met as a chain of negative length.
+    for (field, edit) in [
+        (
+            "fem_mass_kg",
+            (|b: &mut FemSamples| b.fem_mass_kg = -1.0) as fn(&mut FemSamples),
+        ),
+        ("base_radius_m", |b| b.base_radius_m = -0.01),
+        ("tcp_offset_m", |b| b.tcp_offset_m = -0.01),
+        ("samples[0]", |b| b.samples[0].arc_length_m = -0.1),
+    ] {
+        let mut bad = s.clone();
+        edit(&mut bad);
+        bad.write(&dir.join("negative.json")).unwrap();
+        let e = FemSamples::read(&dir.join("negative.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("negative.json") && e.contains(field),
+            "{field}: {e}"
+        );
+    }
     assert_eq!(s2.layers.nodes, s.layers.nodes);
     assert_eq!(s2.samples.len(), s.samples.len());
     for (a, b) in s2.samples.iter().zip(&s.samples) {

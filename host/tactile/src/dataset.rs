@@ -874,6 +874,16 @@ impl Dataset {
                     a.cols
                 )));
             }
+            // a NaN would surface only as a diverged training, far from its cause
+            if let Some(k) = a.data.iter().position(|v| !v.is_finite()) {
+                return Err(TactileError::Input(format!(
+                    "{}: row {}, column {} is {}; a data set holds finite values only",
+                    p.display(),
+                    k / cols.max(1),
+                    k % cols.max(1),
+                    a.data[k]
+                )));
+            }
             Ok(a.data)
         };
         let rows3 =
@@ -1251,6 +1261,12 @@ mod tests {
         );
         let f2: Vec<f64> = d2.setups[0].force_n.iter().flatten().copied().collect();
         assert_eq!(f2, marked, "a finished set-up is read back, not recomputed");
+        let mut poisoned = marked.clone();
+        poisoned[5] = f64::NAN;
+        write_npy(&force_a, &poisoned, 3, 3).unwrap();
+        let e = Dataset::read(&out).unwrap_err().to_string();
+        assert!(e.contains("force_n.npy: row 1, column 2 is NaN"), "{e}");
+        write_npy(&force_a, &marked, 3, 3).unwrap();
         let (b1, b2) = (&d1.setups[1], &d2.setups[1]);
         assert_eq!(b1.displacement_m, b2.displacement_m);
         assert_eq!(b1.force_n, b2.force_n);

@@ -11,7 +11,7 @@ pub fn read_path(path: impl AsRef<std::path::Path>) -> Result<Mesh> {
         path: path.display().to_string(),
         source,
     })?;
-    read_bytes(&bytes)
+    read_bytes(&bytes).map_err(|e| e.in_file(path))
 }
 
 /// Parses an STL held in memory; vertices with bit-identical coordinates are merged.

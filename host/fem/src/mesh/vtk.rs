@@ -18,7 +18,7 @@ pub fn read_path(path: impl AsRef<std::path::Path>) -> Result<Mesh> {
         path: path.display().to_string(),
         source,
     })?;
-    read_bytes(&bytes)
+    read_bytes(&bytes).map_err(|e| e.in_file(path))
 }
 
 /// Scalar types that may appear in a legacy VTK file.
@@ -354,6 +354,8 @@ pub fn read_bytes(bytes: &[u8]) -> Result<Mesh> {
         }
     }
     mesh.points = points;
+    // a NaN coordinate parses as a number; the reader hands out only usable meshes
+    mesh.validate()?;
     Ok(mesh)
 }
 
@@ -694,5 +696,18 @@ mod tests {
         assert!(e.contains("need 72 bytes"), "{e}");
         let e = read_bytes(b"hello").unwrap_err().to_string();
         assert!(e.contains("line 1"), "{e}");
+        // a NaN parses as a number: the reader refuses the mesh, naming the point
+        let bad = ASCII.replace("0 1 0 0 0 1 1 1 1", "0 1 0 0 0 1 1 nan 1");
+        let e = read_bytes(bad.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("point 4 has a non-finite coordinate"), "{e}");
+        // read from a file, the error also names the file
+        let path = std::env::temp_dir().join(format!("ocm-bad-{}.vtk", std::process::id()));
+        std::fs::write(&path, bad.replace("nan", "x")).unwrap();
+        let e = read_path(&path).unwrap_err().to_string();
+        std::fs::remove_file(&path).ok();
+        assert!(
+            e.starts_with(&path.display().to_string()) && e.contains("line 6"),
+            "{e}"
+        );
     }
 }

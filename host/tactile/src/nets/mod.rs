@@ -975,7 +975,10 @@ pub fn save(
 /// architecture or does not match its configuration.
 pub fn load(path: &std::path::Path, device: &Device) -> Result<(UNet, NetConfig)> {
     let ck = ocm_learn::Checkpoint::read(path)?;
-    let cfg: NetConfig = ck.config()?;
+    let cfg: NetConfig = ck.config_of(&[
+        NetKind::Perception.architecture(),
+        NetKind::Rendering.architecture(),
+    ])?;
     let net = cfg.init(device, 0)?;
     let net = ck.load_into(net, cfg.kind.architecture(), &cfg)?;
     Ok((net, cfg))
