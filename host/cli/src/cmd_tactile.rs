@@ -63,7 +63,7 @@ pub enum TactileCommand {
         #[arg(long, default_value_t = 0.45)]
         poisson: f64,
         /// Write a VTK file every this many steps (0: none; the last step always).
-        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 10)]
+        #[arg(long, default_value_t = 10)]
         vtk_every: usize,
         /// Output folder.
         #[arg(long, default_value = "tactile-out")]
@@ -729,12 +729,11 @@ fn render(a: RenderArgs) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let pool = rayon_pool(a.threads)?;
-    let every = a.every.max(1);
     let last = *steps.last().context("no steps")?;
     let chosen: Vec<usize> = steps
         .iter()
         .copied()
-        .filter(|s| s % every == 0 || *s == last)
+        .filter(|s| s % a.every == 0 || *s == last)
         .collect();
     let pb = bar(chosen.len(), "render");
     let mut written = Vec::new();
@@ -1429,7 +1428,7 @@ fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
             }
             // Frames per second of each repeat over all sequences together; the median repeat.
             let frames: usize = scores.iter().map(|s| s.frames).sum();
-            let fps: Vec<f64> = (0..a.repeats.max(1))
+            let fps: Vec<f64> = (0..a.repeats)
                 .map(|k| frames as f64 / scores.iter().map(|s| s.seconds[k]).sum::<f64>())
                 .collect();
             let all_rmse: Vec<f64> = scores.iter().flat_map(|s| s.rmse_m.clone()).collect();
