@@ -32,6 +32,11 @@ pub fn non_negative(s: &str) -> Result<f64, String> {
     Ok(v)
 }
 
+/// A finite number (an angle, an offset).
+pub fn finite(s: &str) -> Result<f64, String> {
+    number(s)
+}
+
 /// A finite number.
 fn number(s: &str) -> Result<f64, String> {
     let v: f64 = s
@@ -61,5 +66,7 @@ mod tests {
         for bad in ["-0.5", "NaN", "-inf"] {
             assert!(non_negative(bad).is_err(), "{bad}");
         }
+        assert_eq!(finite("-2.5"), Ok(-2.5));
+        assert!(finite("nan").is_err() && finite("inf").is_err());
     }
 }

@@ -11,7 +11,7 @@ use ocm_tactile::mask::{Grid, Mask, mask_from_fn};
 use ocm_tactile::metrics;
 use ocm_tactile::output::{StepRow, write_force_depth_csv, write_step};
 use ocm_tactile::setup::digit_setups;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Which gel mesh.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -136,11 +136,28 @@ pub enum TactileCommand {
         #[arg(long, value_parser = crate::arg_check::count, default_value_t = 100)]
         steps: usize,
         /// Mask threshold: mean |frame - background| over R, G, B after a 5 x 5 box blur,
-        /// grey levels.
-        #[arg(long, default_value_t = 10.0)]
-        threshold: f64,
-        /// Reuse the map and step offset of an earlier run (its map.json) instead of fitting
-        /// them (the slow part); the optics are fitted anew.
+        /// grey levels. A comma-separated list is a set of candidates: each is fitted on the
+        /// even frames, and the best fit is kept (default 6,7,8,10; with --fit, the one in its
+        /// map.json). The contact SSIM and L1 are taken over the real contact at 10 grey levels
+        /// whatever the threshold.
+        #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::positive)]
+        threshold: Option<Vec<f64>>,
+        /// Candidate tilts of the indenter about its own x axis, degrees, comma-separated (the
+        /// edge indenter's edge runs along its y axis, so this lowers one end of the edge). Each
+        /// candidate, crossed with every --roll-deg, is a FEM run of its own (cached beside
+        /// --fem); the one whose masks fit the even frames best is kept, the odd frames score
+        /// it (default 0; with --fit, the one in its map.json).
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true,
+              value_parser = crate::arg_check::finite)]
+        pitch_deg: Option<Vec<f64>>,
+        /// Candidate tilts of the indenter about its own y axis, degrees, comma-separated (the
+        /// edge indenter rolls about its edge, pressing one flank more than the other; default
+        /// 0; with --fit, the one in its map.json).
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true,
+              value_parser = crate::arg_check::finite)]
+        roll_deg: Option<Vec<f64>>,
+        /// Reuse the map, step offset, mask threshold and tilt of an earlier run (its map.json)
+        /// instead of fitting them (the slow part); the optics are fitted anew.
         #[arg(long)]
         fit: Option<PathBuf>,
         /// Optical parameters fitted on the even frames beside the smoothing: one gain on the
@@ -408,6 +425,8 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             fem,
             steps,
             threshold,
+            pitch_deg,
+            roll_deg,
             fit,
             optics,
             out,
@@ -419,6 +438,8 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             fem,
             steps,
             threshold,
+            pitch_deg,
+            roll_deg,
             fit,
             optics,
             out,
@@ -779,7 +800,9 @@ struct CompareArgs {
     setup: String,
     fem: PathBuf,
     steps: usize,
-    threshold: f64,
+    threshold: Option<Vec<f64>>,
+    pitch_deg: Option<Vec<f64>>,
+    roll_deg: Option<Vec<f64>>,
     fit: Option<PathBuf>,
     optics: OpticsArg,
     out: PathBuf,
@@ -820,10 +843,124 @@ fn mean(v: &[f64]) -> f64 {
     s.iter().sum::<f64>() / s.len().max(1) as f64
 }
 
+/// Real-mask thresholds `compare-real` fits among by default, grey levels (see the tactile
+/// README: 7 fits the edge6 frames best, the earlier fixed 10 is kept among them).
+const DEFAULT_THRESHOLDS: [f64; 4] = [6.0, 7.0, 8.0, 10.0];
+
+/// Displacement fields of a FEM run, one per step.
+type Fields = Vec<Vec<[f64; 3]>>;
+
+/// The FEM cache of a candidate tilt: `fem` itself untilted, else a sibling folder named
+/// after the tilt.
+fn tilt_cache(fem: &Path, tilt: [f64; 2]) -> PathBuf {
+    if tilt == [0.0, 0.0] {
+        return fem.to_path_buf();
+    }
+    let name = fem
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "fem".into());
+    fem.with_file_name(format!("{name}-pitch{}-roll{}", tilt[0], tilt[1]))
+}
+
+/// The FEM displacement fields of the set-up `s` tilted by `tilt` (degrees about the indenter's
+/// own x and y axes, added to its Euler angles), read from `dir` when complete there, else run
+/// and written there; with the run's seconds when it ran.
+fn edge_fem(
+    a: &CompareArgs,
+    gel: &Gel,
+    grid: &Grid,
+    s: &ocm_tactile::setup::Setup,
+    tilt: [f64; 2],
+    dir: &Path,
+) -> anyhow::Result<(Fields, Option<f64>)> {
+    use ocm_tactile::real;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    if let Some(f) = real::read_cached_steps(dir, a.steps, gel.num_nodes()) {
+        return Ok((f, None));
+    }
+    let indenter = Indenter::from_stl(&s.stl)?;
+    let opts = IndentOptions {
+        steps: a.steps,
+        ..IndentOptions::protocol(gel.material.young_pa)
+    };
+    let mut placement = s.placement;
+    placement.euler_deg[0] += tilt[0];
+    placement.euler_deg[1] += tilt[1];
+    let mut run = Indentation::new(&s.name, gel, &indenter, placement, opts)?;
+    let pb = bar(
+        a.steps,
+        &format!(
+            "FEM {} ({}, pitch {} roll {} deg)",
+            s.name,
+            mesh_file(a.mesh),
+            tilt[0],
+            tilt[1]
+        ),
+    );
+    let t0 = std::time::Instant::now();
+    let mut rows = Vec::new();
+    let mut write_err = None;
+    let outputs = run.run(|st| {
+        match write_step(dir, gel, grid, st, st.step == a.steps) {
+            Ok(m) => rows.push(StepRow::new(st, m)),
+            Err(e) => {
+                write_err.get_or_insert(e);
+            }
+        }
+        pb.inc(1);
+    });
+    pb.finish_and_clear();
+    if let Some(e) = write_err {
+        return Err(e.into());
+    }
+    let outputs = outputs?;
+    let secs = t0.elapsed().as_secs_f64();
+    write_force_depth_csv(&dir.join("force_depth.csv"), &rows)?;
+    Ok((
+        outputs.into_iter().map(|o| o.displacement).collect(),
+        Some(secs),
+    ))
+}
+
 fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     use ocm_tactile::optics::{PolyCalib, Renderer};
     use ocm_tactile::real::{self, CompareOptions, MaskOptions};
     let t_start = std::time::Instant::now();
+    // The candidates: as given, else from --fit's map.json, else the defaults.
+    let given = [&a.threshold, &a.pitch_deg, &a.roll_deg]
+        .iter()
+        .map(|v| v.as_ref().map_or(1, Vec::len))
+        .product::<usize>();
+    if a.fit.is_some() && given > 1 {
+        bail!(
+            "--fit reuses a fitted map: give the tilt and threshold it was fitted with as one --pitch-deg, --roll-deg and --threshold, or none (got {given} candidates)"
+        );
+    }
+    let saved = a.fit.as_deref().map(read_map_json).transpose()?;
+    let saved_value = |key: &str| -> Option<f64> {
+        saved
+            .as_ref()
+            .and_then(|v| v.pointer(key))
+            .and_then(serde_json::Value::as_f64)
+    };
+    let or_saved = |given: &Option<Vec<f64>>, key: &str, default: &[f64]| -> Vec<f64> {
+        match (given, &saved) {
+            (Some(v), _) => v.clone(),
+            (None, Some(_)) => vec![saved_value(key).unwrap_or(default[0])],
+            (None, None) => default.to_vec(),
+        }
+    };
+    let thresholds = or_saved(&a.threshold, "/threshold", &DEFAULT_THRESHOLDS);
+    let tilts: Vec<[f64; 2]> = or_saved(&a.pitch_deg, "/tilt_deg/pitch", &[0.0])
+        .into_iter()
+        .flat_map(|p| {
+            or_saved(&a.roll_deg, "/tilt_deg/roll", &[0.0])
+                .into_iter()
+                .map(move |r| [p, r])
+        })
+        .collect();
+    let candidates = tilts.len() * thresholds.len();
     let digit = ocm_datadir::data_file(a.data.as_deref(), "digit")?;
     let frames = real::load_frames(&digit.join("real-frames-edge6"), "edge6")?;
     let bg = frames[0].clone();
@@ -833,71 +970,90 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     };
     let gel = Gel::digit(digit.join(mesh_file(a.mesh)), GelMaterial::default())?;
     let grid = Grid::for_gel(&gel);
-    std::fs::create_dir_all(&a.fem).with_context(|| format!("creating {}", a.fem.display()))?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    // The FEM, from the cache when it is complete for this mesh.
-    let mut fem_seconds = None;
-    let fields = match real::read_cached_steps(&a.fem, a.steps, gel.num_nodes()) {
-        Some(f) => f,
-        None => {
-            let indenter = Indenter::from_stl(&s.stl)?;
-            let opts = IndentOptions {
-                steps: a.steps,
-                ..IndentOptions::protocol(gel.material.young_pa)
+    // The FEM of each candidate tilt (from its cache when complete); with more than one
+    // candidate (tilt and mask threshold), the map and step offset are fitted against each on
+    // the even frames and the best fit is kept; the odd frames score only the one kept.
+    let mut tried = Vec::new();
+    let mut best: Option<(usize, f64, Fields, Option<real::MaskFit>)> = None;
+    let mut fem_seconds = Vec::new();
+    for (i, &tilt) in tilts.iter().enumerate() {
+        let dir = tilt_cache(&a.fem, tilt);
+        let (fields, secs) = edge_fem(&a, &gel, &grid, s, tilt, &dir)?;
+        fem_seconds.extend(secs);
+        if candidates == 1 {
+            best = Some((i, thresholds[0], fields, None));
+            break;
+        }
+        let mut kept = None;
+        for &threshold in &thresholds {
+            let mask = MaskOptions {
+                threshold,
+                ..MaskOptions::default()
             };
-            let mut run = Indentation::new(&s.name, &gel, &indenter, s.placement, opts)?;
-            let pb = bar(a.steps, &format!("FEM {} ({})", s.name, mesh_file(a.mesh)));
-            let t0 = std::time::Instant::now();
-            let mut rows = Vec::new();
-            let mut write_err = None;
-            let outputs = run.run(|st| {
-                match write_step(&a.fem, &gel, &grid, st, st.step == a.steps) {
-                    Ok(m) => rows.push(StepRow::new(st, m)),
-                    Err(e) => {
-                        write_err.get_or_insert(e);
-                    }
-                }
-                pb.inc(1);
-            });
+            let pairs = real::MaskPairs::new(&gel, &fields, &frames, &mask)?;
+            let (lo, hi) = pairs.offsets(CompareOptions::default().offset_window)?;
+            let pb = bar(
+                1,
+                &format!(
+                    "map fit: pitch {} roll {} deg, threshold {threshold}",
+                    tilt[0], tilt[1]
+                ),
+            );
+            let fit = pairs.fit(lo..=hi)?;
             pb.finish_and_clear();
-            if let Some(e) = write_err {
-                return Err(e.into());
+            tried.push(serde_json::json!({
+                "pitch_deg": tilt[0],
+                "roll_deg": tilt[1],
+                "threshold": threshold,
+                "fem_cache": dir.display().to_string(),
+                "fit_iou": fit.fit_iou,
+                "offset_steps": fit.offset_steps,
+            }));
+            let better = best
+                .as_ref()
+                .is_none_or(|b| b.3.is_none_or(|f| fit.fit_iou > f.fit_iou))
+                && kept.is_none_or(|(_, f): (f64, real::MaskFit)| fit.fit_iou > f.fit_iou);
+            if better {
+                kept = Some((threshold, fit));
             }
-            let outputs = outputs?;
-            fem_seconds = Some(t0.elapsed().as_secs_f64());
-            write_force_depth_csv(&a.fem.join("force_depth.csv"), &rows)?;
-            outputs.into_iter().map(|o| o.displacement).collect()
         }
+        if let Some((threshold, fit)) = kept {
+            best = Some((i, threshold, fields, Some(fit)));
+        }
+    }
+    let Some((chosen, threshold, fields, tilt_fit)) = best else {
+        bail!("no tilt candidates");
     };
-    let fixed_fit = match &a.fit {
-        Some(p) => {
-            let v = read_map_json(p)?;
-            Some(real::MaskFit {
-                map: serde_json::from_value(v.get("map").cloned().unwrap_or_default())
-                    .with_context(|| format!("{}: no camera map", p.display()))?,
-                offset_steps: v
-                    .get("offset_steps")
-                    .and_then(serde_json::Value::as_u64)
-                    .with_context(|| format!("{}: no offset_steps", p.display()))?
-                    as usize,
-                fit_iou: v
-                    .get("fit_iou")
-                    .and_then(serde_json::Value::as_f64)
-                    .unwrap_or(f64::NAN),
-            })
-        }
-        None => None,
+    let tilt = tilts[chosen];
+    let mask_opts = MaskOptions {
+        threshold,
+        ..MaskOptions::default()
+    };
+    let fixed_fit = match (&a.fit, &saved) {
+        (Some(p), Some(v)) => Some(real::MaskFit {
+            map: serde_json::from_value(v.get("map").cloned().unwrap_or_default())
+                .with_context(|| format!("{}: no camera map", p.display()))?,
+            offset_steps: v
+                .get("offset_steps")
+                .and_then(serde_json::Value::as_u64)
+                .with_context(|| format!("{}: no offset_steps", p.display()))?
+                as usize,
+            fit_iou: v
+                .get("fit_iou")
+                .and_then(serde_json::Value::as_f64)
+                .unwrap_or(f64::NAN),
+        }),
+        _ => None,
     };
     let opts = CompareOptions {
-        mask: MaskOptions {
-            threshold: a.threshold,
-            ..MaskOptions::default()
-        },
+        mask: mask_opts,
         optics: match a.optics {
             OpticsArg::Gain => real::OpticsFit::Gain,
             OpticsArg::ColourDepth => real::OpticsFit::ColourDepth,
         },
-        fixed_fit,
+        // the tilts' map fits stand (each is what a single run would fit)
+        fixed_fit: fixed_fit.or(tilt_fit),
         ..CompareOptions::default()
     };
     let calib = PolyCalib::from_npz(digit.join(real::DEFAULT_CALIB))?;
@@ -950,11 +1106,14 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         "nodes": gel.num_nodes(),
         "fem_steps": fields.len(),
         "fem_seconds": fem_seconds,
-        "fem_cache": a.fem.display().to_string(),
+        "fem_cache": tilt_cache(&a.fem, tilt).display().to_string(),
+        "tilt_deg": {"pitch": tilt[0], "roll": tilt[1]},
+        "tilts_tried": tried,
         "frames": frames.len(),
         "fit_frames": "even 2..98",
         "score_frames": "odd 1..99",
-        "mask_threshold": a.threshold,
+        "mask_threshold": threshold,
+        "thresholds_tried": thresholds,
         "map": c.fit.map,
         "map_mm_per_px": 1e3 / c.fit.map.px_per_m,
         "offset_steps": c.fit.offset_steps,
@@ -1000,6 +1159,8 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             "map": c.fit.map,
             "offset_steps": c.fit.offset_steps,
             "fit_iou": c.fit.fit_iou,
+            "threshold": threshold,
+            "tilt_deg": {"pitch": tilt[0], "roll": tilt[1]},
             "gain": c.gain,
             "smooth_px": c.smooth_px,
             "colour": c.colour,

@@ -158,3 +158,32 @@ fn malformed_shards_and_states_name_their_flag() {
         );
     }
 }
+
+#[test]
+fn compare_real_candidates_are_checked_before_any_work() {
+    refused_flag(
+        &["tactile", "compare-real", "--threshold", "10,0"],
+        "--threshold",
+        "must be greater than 0",
+    );
+    refused_flag(
+        &["tactile", "compare-real", "--pitch-deg=0,nan"],
+        "--pitch-deg",
+        "finite",
+    );
+    // a fitted map belongs to one tilt and threshold; several candidates with it are refused
+    // before the frames, the mesh or the FEM are touched
+    let e = fails(&[
+        "tactile",
+        "compare-real",
+        "--fit",
+        "no-such-map.json",
+        "--roll-deg=-2,0,2",
+        "--data",
+        "no-such-dir",
+    ]);
+    assert!(
+        e.contains("--fit reuses a fitted map") && e.contains("3 candidates"),
+        "{e}"
+    );
+}

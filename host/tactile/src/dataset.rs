@@ -700,7 +700,19 @@ pub fn build_reduced(
         // it: with both there the set-up is complete; with the arrays alone only its masks
         // are missing (an interrupted run, or a data set from before the masks).
         if dir.join("point_counts.npy").is_file() {
-            let s = read_setup(&dir, setup, top.nodes.len())?;
+            let indenter = setup
+                .stl
+                .file_stem()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let s = read_setup_arrays(
+                &dir,
+                &setup.name,
+                &indenter,
+                setup.unseen,
+                top.nodes.len(),
+                None,
+            )?;
             let complete = dir.join("mask_stats.npy").is_file();
             return Ok((s, None, complete));
         }
@@ -709,50 +721,82 @@ pub fn build_reduced(
     })
 }
 
-/// One set-up's arrays read back from `dir` (as [`write_setup`] wrote them).
-fn read_setup(dir: &Path, setup: &Setup, m: usize) -> Result<SetupSamples> {
-    let read = |name: &str, cols: usize| -> Result<Vec<f64>> {
-        let p = dir.join(name);
-        let a = ocm_fem::npy::read_f64_2d(&p)?;
-        if a.cols != cols {
-            return Err(TactileError::Input(format!(
-                "{}: {} columns, expected {cols} (another mesh?)",
-                p.display(),
-                a.cols
-            )));
-        }
-        Ok(a.data)
-    };
+/// An `f64` array of `cols` columns (and `rows` rows, when given) read from `p`; a shape that
+/// disagrees or a non-finite value is an error naming the file, and the row and column.
+fn read_checked(p: &Path, cols: usize, rows: Option<usize>) -> Result<Vec<f64>> {
+    let a = ocm_fem::npy::read_f64_2d(p)?;
+    if a.cols != cols || rows.is_some_and(|r| r != a.rows) {
+        return Err(TactileError::Input(format!(
+            "{}: {} x {}, expected {} x {cols} (another mesh, or an interrupted write?)",
+            p.display(),
+            a.rows,
+            a.cols,
+            rows.map_or("N".to_string(), |r| r.to_string()),
+        )));
+    }
+    // a NaN would surface only as a diverged training, far from its cause
+    if let Some(k) = a.data.iter().position(|v| !v.is_finite()) {
+        return Err(TactileError::Input(format!(
+            "{}: row {}, column {} is {}; a data set holds finite values only",
+            p.display(),
+            k / cols.max(1),
+            k % cols.max(1),
+            a.data[k]
+        )));
+    }
+    Ok(a.data)
+}
+
+/// One set-up's arrays read back from `dir` (as [`write_setup`] wrote them), for `m` top
+/// nodes; with `samples`, each per-sample array must hold that many rows. A shape that
+/// disagrees, point counts that do not add up, or a non-finite value is an error naming the
+/// file (and the row and column of the value).
+fn read_setup_arrays(
+    dir: &Path,
+    name: &str,
+    indenter: &str,
+    unseen: bool,
+    m: usize,
+    samples: Option<usize>,
+) -> Result<SetupSamples> {
+    let read =
+        |file: &str, cols: usize, rows: Option<usize>| read_checked(&dir.join(file), cols, rows);
     let rows3 =
         |v: Vec<f64>| -> Vec<[f64; 3]> { v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect() };
-    let counts = read("point_counts.npy", 1)?;
-    let pts = rows3(read("points_m.npy", 3)?);
+    let depth_m = read("depth_m.npy", 1, samples)?;
+    // every other per-sample array has as many rows as the depths
+    let n = Some(depth_m.len());
+    let counts = read("point_counts.npy", 1, n)?;
+    let pts = rows3(read("points_m.npy", 3, None)?);
+    let total: f64 = counts.iter().sum();
+    if counts.iter().any(|c| *c < 0.0 || c.fract() != 0.0) || total as usize != pts.len() {
+        return Err(TactileError::Input(format!(
+            "{}: {} points but the counts in point_counts.npy add to {total}",
+            dir.join("points_m.npy").display(),
+            pts.len()
+        )));
+    }
     let mut points_m = Vec::new();
     let mut at = 0;
     for &c in &counts {
-        let end = (at + c as usize).min(pts.len());
-        points_m.push(pts[at..end].to_vec());
-        at = end;
+        points_m.push(pts[at..at + c as usize].to_vec());
+        at += c as usize;
     }
-    let fields = |name: &str| -> Result<Vec<Vec<[f64; 3]>>> {
-        Ok(read(name, 3 * m)?
+    let fields = |file: &str| -> Result<Vec<Vec<[f64; 3]>>> {
+        Ok(read(file, 3 * m, n)?
             .chunks(3 * m)
             .map(|r| rows3(r.to_vec()))
             .collect())
     };
     Ok(SetupSamples {
-        name: setup.name.clone(),
-        indenter: setup
-            .stl
-            .file_stem()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default(),
-        unseen: setup.unseen,
-        depth_m: read("depth_m.npy", 1)?,
-        force_n: rows3(read("force_n.npy", 3)?),
-        translation_m: rows3(read("translation_m.npy", 3)?),
+        name: name.to_string(),
+        indenter: indenter.to_string(),
+        unseen,
+        force_n: rows3(read("force_n.npy", 3, n)?),
+        translation_m: rows3(read("translation_m.npy", 3, n)?),
         displacement_m: fields("displacement_m.npy")?,
         nodal_force_n: fields("nodal_force_n.npy")?,
+        depth_m,
         points_m,
     })
 }
@@ -864,32 +908,11 @@ impl Dataset {
             )));
         }
         let m = manifest.top_nodes;
-        let read = |p: PathBuf, cols: usize, rows: Option<usize>| -> Result<Vec<f64>> {
-            let a = ocm_fem::npy::read_f64_2d(&p)?;
-            if a.cols != cols || rows.is_some_and(|r| r != a.rows) {
-                return Err(TactileError::Input(format!(
-                    "{}: {} x {} does not match the manifest",
-                    p.display(),
-                    a.rows,
-                    a.cols
-                )));
-            }
-            // a NaN would surface only as a diverged training, far from its cause
-            if let Some(k) = a.data.iter().position(|v| !v.is_finite()) {
-                return Err(TactileError::Input(format!(
-                    "{}: row {}, column {} is {}; a data set holds finite values only",
-                    p.display(),
-                    k / cols.max(1),
-                    k % cols.max(1),
-                    a.data[k]
-                )));
-            }
-            Ok(a.data)
-        };
-        let rows3 =
-            |v: Vec<f64>| -> Vec<[f64; 3]> { v.chunks(3).map(|c| [c[0], c[1], c[2]]).collect() };
-        let top_rest_m = rows3(read(dir.join("top_rest_m.npy"), 3, Some(m))?);
-        let top_edges = read(dir.join("top_edges.npy"), 2, None)?
+        let top_rest_m: Vec<[f64; 3]> = read_checked(&dir.join("top_rest_m.npy"), 3, Some(m))?
+            .chunks(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect();
+        let top_edges = read_checked(&dir.join("top_edges.npy"), 2, None)?
             .chunks(2)
             .map(|c| [c[0] as usize, c[1] as usize])
             .collect::<Vec<_>>();
@@ -899,45 +922,20 @@ impl Dataset {
                 dir.join("top_edges.npy").display()
             )));
         }
-        let mut setups = Vec::new();
-        for e in &manifest.setups {
-            let d = dir.join(&e.name);
-            let n = Some(e.samples);
-            let depth_m = read(d.join("depth_m.npy"), 1, n)?;
-            let counts = read(d.join("point_counts.npy"), 1, n)?;
-            let pts = rows3(read(d.join("points_m.npy"), 3, None)?);
-            let total: f64 = counts.iter().sum();
-            if total as usize != pts.len() {
-                return Err(TactileError::Input(format!(
-                    "{}: {} points but the counts add to {total}",
-                    d.join("points_m.npy").display(),
-                    pts.len()
-                )));
-            }
-            let mut points_m = Vec::new();
-            let mut at = 0;
-            for &c in &counts {
-                points_m.push(pts[at..at + c as usize].to_vec());
-                at += c as usize;
-            }
-            let fields = |name: &str| -> Result<Vec<Vec<[f64; 3]>>> {
-                Ok(read(d.join(name), 3 * m, n)?
-                    .chunks(3 * m)
-                    .map(|r| rows3(r.to_vec()))
-                    .collect())
-            };
-            setups.push(SetupSamples {
-                name: e.name.clone(),
-                indenter: e.indenter.clone(),
-                unseen: e.unseen,
-                force_n: rows3(read(d.join("force_n.npy"), 3, n)?),
-                translation_m: rows3(read(d.join("translation_m.npy"), 3, n)?),
-                displacement_m: fields("displacement_m.npy")?,
-                nodal_force_n: fields("nodal_force_n.npy")?,
-                depth_m,
-                points_m,
-            });
-        }
+        let setups = manifest
+            .setups
+            .iter()
+            .map(|e| {
+                read_setup_arrays(
+                    &dir.join(&e.name),
+                    &e.name,
+                    &e.indenter,
+                    e.unseen,
+                    m,
+                    Some(e.samples),
+                )
+            })
+            .collect::<Result<Vec<_>>>()?;
         Ok(Dataset {
             dir: dir.to_path_buf(),
             manifest,
@@ -1200,7 +1198,7 @@ mod tests {
         };
         let ro = ReducedOptions::for_modulus(gel.material.young_pa);
         let out = dir.join("data");
-        let run = || {
+        let try_run = || {
             build_reduced(
                 &gel,
                 "block",
@@ -1213,8 +1211,8 @@ mod tests {
                 &out,
                 |_, _| {},
             )
-            .unwrap()
         };
+        let run = || try_run().unwrap();
         let first = run();
         assert_eq!(first.setups.len(), 2);
         let d1 = Dataset::read(&out).unwrap();
@@ -1266,7 +1264,23 @@ mod tests {
         write_npy(&force_a, &poisoned, 3, 3).unwrap();
         let e = Dataset::read(&out).unwrap_err().to_string();
         assert!(e.contains("force_n.npy: row 1, column 2 is NaN"), "{e}");
+        // resuming reads a finished set-up back with the same checks
+        let e = try_run().unwrap_err().to_string();
+        assert!(e.contains("force_n.npy: row 1, column 2 is NaN"), "{e}");
         write_npy(&force_a, &marked, 3, 3).unwrap();
+        // point counts that do not add up to the points are refused, not cut short
+        let counts_a = out.join("a").join("point_counts.npy");
+        let counts = ocm_fem::npy::read_f64_2d(&counts_a).unwrap().data;
+        let mut more = counts.clone();
+        more[2] += 1.0;
+        write_npy(&counts_a, &more, 3, 1).unwrap();
+        for e in [
+            try_run().unwrap_err().to_string(),
+            Dataset::read(&out).unwrap_err().to_string(),
+        ] {
+            assert!(e.contains("points_m.npy") && e.contains("add to"), "{e}");
+        }
+        write_npy(&counts_a, &counts, 3, 1).unwrap();
         let (b1, b2) = (&d1.setups[1], &d2.setups[1]);
         assert_eq!(b1.displacement_m, b2.displacement_m);
         assert_eq!(b1.force_n, b2.force_n);

@@ -786,6 +786,10 @@ pub enum OpticsFit {
 pub struct CompareOptions {
     /// How real (and rendered) frames are turned into masks.
     pub mask: MaskOptions,
+    /// How the real contact region that the contact SSIM and L1 are taken over is measured:
+    /// the default threshold whatever `mask` is, so that a fitted mask threshold does not move
+    /// the region those figures are compared on.
+    pub region: MaskOptions,
     /// Step offsets tried on each side of the first-contact estimate.
     pub offset_window: usize,
     /// The optical parameters fitted.
@@ -798,7 +802,8 @@ impl Default for CompareOptions {
     fn default() -> Self {
         CompareOptions {
             mask: MaskOptions::default(),
-            offset_window: 4,
+            region: MaskOptions::default(),
+            offset_window: 6,
             optics: OpticsFit::ColourDepth,
             fixed_fit: None,
         }
@@ -901,6 +906,104 @@ pub fn render_paired(
     }
 }
 
+/// Share of the largest real fitting mask's area from which a real frame counts as touched
+/// when the step offsets to try are centred ([`MaskPairs::offsets`]).
+pub const FIRST_CONTACT_SHARE: f64 = 0.01;
+
+/// The measured masks of the real frames beside the FEM's, the even frames to fit on and the
+/// odd ones to score: the mask half of [`compare`], on its own so that several FEM runs (of
+/// candidate indenter tilts, say) can be fitted against the same frames and the best kept.
+pub struct MaskPairs {
+    /// Measured mask of each real frame (frame 0, the background, is empty).
+    pub real: Vec<Mask>,
+    /// FEM mask of step j + 1 at index j.
+    pub fem: Vec<Mask>,
+    /// Frames fitted on (even, from 2).
+    pub fit_frames: Vec<usize>,
+    /// Frames scored (odd).
+    pub score_frames: Vec<usize>,
+    /// How the real masks were measured.
+    pub mask: MaskOptions,
+}
+
+impl MaskPairs {
+    /// Masks of `frames` (frame 0 the background) measured with `mask`, and of the FEM's
+    /// `fields` (10 um apart).
+    pub fn new(
+        gel: &Gel,
+        fields: &[Vec<[f64; 3]>],
+        frames: &[RgbImage],
+        mask: &MaskOptions,
+    ) -> Result<MaskPairs> {
+        let Some(bg) = frames.first() else {
+            return Err(TactileError::Input("no real frames".into()));
+        };
+        let real: Vec<Mask> = frames
+            .iter()
+            .map(|f| measured_mask(f, bg, mask))
+            .collect::<Result<_>>()?;
+        let n = frames.len();
+        Ok(MaskPairs {
+            real,
+            fem: fem_masks(gel, fields),
+            fit_frames: (1..n).filter(|k| k % 2 == 0).collect(),
+            score_frames: (1..n).filter(|k| k % 2 == 1).collect(),
+            mask: *mask,
+        })
+    }
+
+    /// The step offsets worth trying: `window` on each side of the first real fitting frame
+    /// with contact minus the FEM's first step with contact. Either counts as in contact from
+    /// [`FIRST_CONTACT_SHARE`] of its largest mask's area: at a low threshold a few pixels of
+    /// noise in a real frame cross it long before the indenter touches.
+    pub fn offsets(&self, window: usize) -> Result<(usize, usize)> {
+        let largest = self
+            .fit_frames
+            .iter()
+            .map(|&k| self.real[k].count())
+            .max()
+            .unwrap_or(0);
+        let k0 = self
+            .fit_frames
+            .iter()
+            .copied()
+            .find(|&k| {
+                let c = self.real[k].count();
+                c > 0 && c as f64 >= FIRST_CONTACT_SHARE * largest as f64
+            })
+            .ok_or_else(|| {
+                TactileError::Input(format!(
+                    "no real fitting frame shows contact at threshold {} grey levels",
+                    self.mask.threshold
+                ))
+            })?;
+        let fem_largest = self.fem.iter().map(Mask::count).max().unwrap_or(0);
+        let j0 = self
+            .fem
+            .iter()
+            .position(|m| {
+                let c = m.count();
+                c > 0 && c as f64 >= FIRST_CONTACT_SHARE * fem_largest as f64
+            })
+            .ok_or_else(|| {
+                TactileError::Input("the FEM never reaches the 30 um mask threshold".into())
+            })?
+            + 1;
+        let centre = k0.saturating_sub(j0);
+        Ok((centre.saturating_sub(window), centre + window))
+    }
+
+    /// The map and step offset fitted on the fitting frames ([`fit_map`]).
+    pub fn fit(&self, offsets: std::ops::RangeInclusive<usize>) -> Result<MaskFit> {
+        fit_map(&self.real, &self.fem, &self.fit_frames, offsets)
+    }
+
+    /// `fit` scored on the scoring frames ([`score_map`]).
+    pub fn score(&self, fit: &MaskFit) -> Result<Vec<MaskScore>> {
+        score_map(&self.real, &self.fem, fit, &self.score_frames)
+    }
+}
+
 /// The FEM (`fields[j]` = displacement of step j + 1, 10 um apart) against the real frames
 /// (`frames[0]` the background, frame k at k steps from the start): masks, the map fitted on
 /// the even frames and scored on the odd ones, then rendered frames with `renderer` (whose
@@ -914,42 +1017,32 @@ pub fn compare(
     progress: &mut dyn FnMut(&str),
 ) -> Result<Comparison> {
     let bg = &frames[0];
-    let fem = fem_masks(gel, fields);
-    let real: Vec<Mask> = frames
-        .iter()
-        .map(|f| measured_mask(f, bg, &opts.mask))
-        .collect::<Result<_>>()?;
-    let n = frames.len();
-    let fit_frames: Vec<usize> = (1..n).filter(|k| k % 2 == 0).collect();
-    let score_frames: Vec<usize> = (1..n).filter(|k| k % 2 == 1).collect();
-    let k0 = fit_frames
-        .iter()
-        .copied()
-        .find(|&k| real[k].count() > 0)
-        .ok_or_else(|| {
-            TactileError::Input(format!(
-                "no real fitting frame shows contact at threshold {} grey levels",
-                opts.mask.threshold
-            ))
-        })?;
-    let j0 = fem.iter().position(|m| m.count() > 0).ok_or_else(|| {
-        TactileError::Input("the FEM never reaches the 30 um mask threshold".into())
-    })? + 1;
-    let centre = k0.saturating_sub(j0);
-    let lo = centre.saturating_sub(opts.offset_window);
-    let hi = centre + opts.offset_window;
     progress("fitting the gel-to-image map");
+    let pairs = MaskPairs::new(gel, fields, frames, &opts.mask)?;
+    let (lo, hi) = pairs.offsets(opts.offset_window)?;
     let fit = match opts.fixed_fit {
         Some(f) => f,
-        None => fit_map(&real, &fem, &fit_frames, lo..=hi)?,
+        None => pairs.fit(lo..=hi)?,
     };
-    let masks = score_map(&real, &fem, &fit, &score_frames)?;
+    let masks = pairs.score(&fit)?;
     progress("rendering");
     let sampler = SurfaceSampler::new(gel, bg.rows, bg.cols, &fit.map);
     // Smoothing and gain of the optics, fitted on the fitting frames: for each smoothing the
     // least-squares gain, then the smoothing with the best mean SSIM over the contact regions
     // (over the whole frame the unchanged background decides, and rendering faintly wins).
-    let regions: Vec<Option<Vec<bool>>> = real.iter().map(contact_region).collect();
+    let regions: Vec<Option<Vec<bool>>> = if opts.region == opts.mask {
+        pairs.real.iter().map(contact_region).collect()
+    } else {
+        frames
+            .iter()
+            .map(|f| Ok(contact_region(&measured_mask(f, bg, &opts.region)?)))
+            .collect::<Result<_>>()?
+    };
+    let MaskPairs {
+        fit_frames,
+        score_frames,
+        ..
+    } = pairs;
     let fit_optics = |renderer: &mut Renderer, model: OpticsFit| -> Result<FittedOptics> {
         let mut best: Option<FittedOptics> = None;
         for smooth in SMOOTHING_PX {

@@ -396,6 +396,27 @@ fn map_fit_recovers_a_known_map() {
     let c_fit = f.map.to_px([8e-3, 6e-3]);
     assert!((c_true[0] - c_fit[0]).hypot(c_true[1] - c_fit[1]) < 1.0);
     assert!((f.map.px_per_m / truth.px_per_m - 1.0).abs() < 0.03);
+
+    // A few pixels of noise in a frame before the touch do not move the offsets searched:
+    // the window is centred on the first frame with a real share of the contact.
+    let mut noisy = real_masks.clone();
+    let cols = noisy[2].grid.cols;
+    for c in 100..103 {
+        noisy[2].pixels[120 * cols + c] = true;
+    }
+    let pairs = real::MaskPairs {
+        real: noisy,
+        fem: fem.clone(),
+        fit_frames: fit.clone(),
+        score_frames: score.clone(),
+        mask: MaskOptions::default(),
+    };
+    let (lo, hi) = pairs.offsets(1).unwrap();
+    assert!((lo..=hi).contains(&offset), "{lo}..={hi}");
+    let f = pairs.fit(lo..=hi).unwrap();
+    assert_eq!(f.offset_steps, offset);
+    let s = pairs.score(&f).unwrap();
+    assert!(s.iter().all(|m| m.iou > 0.9), "{s:?}");
 }
 
 /// The real calibration loads with its 125 bins; the real frames load at 240 x 320; the frame
