@@ -976,6 +976,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     // the even frames and the best fit is kept; the odd frames score only the one kept.
     let mut tried = Vec::new();
     let mut best: Option<(usize, f64, Fields, Option<real::MaskFit>)> = None;
+    let mut best_iou = f64::NEG_INFINITY;
     let mut fem_seconds = Vec::new();
     for (i, &tilt) in tilts.iter().enumerate() {
         let dir = tilt_cache(&a.fem, tilt);
@@ -1010,11 +1011,8 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
                 "fit_iou": fit.fit_iou,
                 "offset_steps": fit.offset_steps,
             }));
-            let better = best
-                .as_ref()
-                .is_none_or(|b| b.3.is_none_or(|f| fit.fit_iou > f.fit_iou))
-                && kept.is_none_or(|(_, f): (f64, real::MaskFit)| fit.fit_iou > f.fit_iou);
-            if better {
+            if fit.fit_iou > best_iou {
+                best_iou = fit.fit_iou;
                 kept = Some((threshold, fit));
             }
         }

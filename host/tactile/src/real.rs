@@ -906,8 +906,8 @@ pub fn render_paired(
     }
 }
 
-/// Share of the largest real fitting mask's area from which a real frame counts as touched
-/// when the step offsets to try are centred ([`MaskPairs::offsets`]).
+/// Share of its largest mask's area from which a real fitting frame, or a FEM step, counts as
+/// touched when the step offsets to try are centred ([`MaskPairs::offsets`]).
 pub const FIRST_CONTACT_SHARE: f64 = 0.01;
 
 /// The measured masks of the real frames beside the FEM's, the even frames to fit on and the
