@@ -62,6 +62,10 @@ pub enum TactileCommand {
         /// Poisson's ratio of the gel.
         #[arg(long, default_value_t = 0.45)]
         poisson: f64,
+        /// Crown of the gel's top face: radius of curvature of a dome centred on the top face,
+        /// mm (0: the flat mesh). `compare-real` fits 20 mm on the real edge6 frames.
+        #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 0.0)]
+        crown_radius_mm: f64,
         /// Write a VTK file every this many steps (0: none; the last step always).
         #[arg(long, default_value_t = 10)]
         vtk_every: usize,
@@ -156,7 +160,22 @@ pub enum TactileCommand {
         #[arg(long, value_delimiter = ',', allow_hyphen_values = true,
               value_parser = crate::arg_check::finite)]
         roll_deg: Option<Vec<f64>>,
-        /// Reuse the map, step offset, mask threshold and tilt of an earlier run (its map.json)
+        /// Candidate crowns of the gel's top face: radius of curvature of a dome whose apex lies
+        /// under the middle of the indenter's tip, mm, comma-separated; 0 is the flat gel of the
+        /// mesh. Real DIGIT gels are domed; each candidate, crossed with the tilts, is a FEM run
+        /// of its own (cached beside --fem) and the best fit on the even frames is kept
+        /// (default 0; with --fit, the one in its map.json).
+        #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::non_negative)]
+        crown_radius_mm: Option<Vec<f64>>,
+        /// Where the crown's apex lies: at the centre of the gel's top face, or under the middle
+        /// of the indenter's tip (default gel-centre; with --fit, the one in its map.json).
+        #[arg(long, value_enum)]
+        crown_apex: Option<CrownApex>,
+        /// The camera's scale, mm of gel per pixel of the 240 x 320 frame, when it is known:
+        /// the map fit then keeps it and fits only the rotation, shift and mirror.
+        #[arg(long, value_parser = crate::arg_check::positive)]
+        mm_per_px: Option<f64>,
+        /// Reuse the map, step offset, mask threshold, tilt and crown of an earlier run (its map.json)
         /// instead of fitting them (the slow part); the optics are fitted anew.
         #[arg(long)]
         fit: Option<PathBuf>,
@@ -278,6 +297,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             friction,
             young_pa,
             poisson,
+            crown_radius_mm,
             vtk_every,
             out,
             json,
@@ -296,7 +316,14 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 MeshArg::Coarse => "DIGIT_remesh2.vtk",
             };
             let material = GelMaterial { young_pa, poisson };
-            let gel = Gel::digit(digit.join(mesh_file), material)?;
+            let gel = crowned_gel(
+                &digit.join(mesh_file),
+                material,
+                s,
+                [0.0; 2],
+                crown_radius_mm,
+                CrownApex::GelCentre,
+            )?;
             let indenter = Indenter::from_stl(&s.stl)?;
             let mut opts = IndentOptions::protocol(young_pa);
             opts.steps = steps;
@@ -348,6 +375,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 "setup": s.name,
                 "indenter": indenter.name,
                 "mesh": mesh_file,
+                "crown_radius_mm": crown_radius_mm,
                 "nodes": gel.num_nodes(),
                 "steps": steps,
                 "depth_mm": last.depth_mm,
@@ -427,6 +455,9 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             threshold,
             pitch_deg,
             roll_deg,
+            crown_radius_mm,
+            crown_apex,
+            mm_per_px,
             fit,
             optics,
             out,
@@ -440,6 +471,9 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             threshold,
             pitch_deg,
             roll_deg,
+            crown_radius_mm,
+            crown_apex,
+            mm_per_px,
             fit,
             optics,
             out,
@@ -803,10 +837,22 @@ struct CompareArgs {
     threshold: Option<Vec<f64>>,
     pitch_deg: Option<Vec<f64>>,
     roll_deg: Option<Vec<f64>>,
+    crown_radius_mm: Option<Vec<f64>>,
+    crown_apex: Option<CrownApex>,
+    mm_per_px: Option<f64>,
     fit: Option<PathBuf>,
     optics: OpticsArg,
     out: PathBuf,
     json: bool,
+}
+
+/// Where `compare-real` puts the apex of a crowned gel.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CrownApex {
+    /// Under the middle of the indenter's tip (where the flat gel is first pressed).
+    Tip,
+    /// At the centre of the gel's top face (the sensor's own axis).
+    GelCentre,
 }
 
 /// Optical parameters `compare-real` fits.
@@ -847,20 +893,77 @@ fn mean(v: &[f64]) -> f64 {
 /// README: 7 fits the edge6 frames best, the earlier fixed 10 is kept among them).
 const DEFAULT_THRESHOLDS: [f64; 4] = [6.0, 7.0, 8.0, 10.0];
 
+/// Crown radius of the gel `compare-real` assumes by default, mm: fitted on the edge6 frames
+/// among 11-30 mm with the apex at the gel's centre (see the tactile README).
+const DEFAULT_CROWN_RADIUS_MM: f64 = 20.0;
+
+/// The name `--crown-apex` takes for `apex`.
+fn apex_name(apex: CrownApex) -> String {
+    clap::ValueEnum::to_possible_value(&apex)
+        .map(|v| v.get_name().to_string())
+        .unwrap_or_default()
+}
+
 /// Displacement fields of a FEM run, one per step.
 type Fields = Vec<Vec<[f64; 3]>>;
 
-/// The FEM cache of a candidate tilt: `fem` itself untilted, else a sibling folder named
-/// after the tilt.
-fn tilt_cache(fem: &Path, tilt: [f64; 2]) -> PathBuf {
-    if tilt == [0.0, 0.0] {
+/// The FEM cache of a candidate tilt and crown radius (mm, 0: flat): `fem` itself untilted
+/// and flat, else a sibling folder named after them.
+fn tilt_cache(fem: &Path, tilt: [f64; 2], crown_mm: f64, apex: CrownApex) -> PathBuf {
+    if tilt == [0.0, 0.0] && crown_mm == 0.0 {
         return fem.to_path_buf();
     }
-    let name = fem
+    let mut name = fem
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "fem".into());
-    fem.with_file_name(format!("{name}-pitch{}-roll{}", tilt[0], tilt[1]))
+    if tilt != [0.0, 0.0] {
+        name = format!("{name}-pitch{}-roll{}", tilt[0], tilt[1]);
+    }
+    if crown_mm != 0.0 {
+        name = format!("{name}-crown{crown_mm}");
+        if apex == CrownApex::GelCentre {
+            name.push_str("-centre");
+        }
+    }
+    fem.with_file_name(name)
+}
+
+/// The gel at `path` with its top crowned to `crown_mm` (0: flat) about `apex`: the centre of
+/// its top face, or the point under the middle of the tip of set-up `s`'s indenter tilted by
+/// `tilt`.
+fn crowned_gel(
+    path: &Path,
+    material: GelMaterial,
+    s: &ocm_tactile::setup::Setup,
+    tilt: [f64; 2],
+    crown_mm: f64,
+    apex: CrownApex,
+) -> anyhow::Result<Gel> {
+    if crown_mm == 0.0 {
+        return Ok(Gel::digit(path, material)?);
+    }
+    let apex_m = match apex {
+        CrownApex::Tip => {
+            let indenter = Indenter::from_stl(&s.stl)?;
+            let mut euler = s.placement.euler_deg;
+            euler[0] += tilt[0];
+            euler[1] += tilt[1];
+            let rot = ocm_tactile::indenter::Pose::rotation_from_degrees(euler);
+            // The tip's middle: where the flat gel is first pressed (its lowest 20 um).
+            let tip = indenter.tip_center_xy(&rot, 20e-6);
+            [s.placement.xy_m[0] + tip[0], s.placement.xy_m[1] + tip[1]]
+        }
+        CrownApex::GelCentre => {
+            let (lo, hi) = Gel::digit(path, material)?.top_bounds();
+            [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])]
+        }
+    };
+    let crown = ocm_tactile::gel::Crown {
+        radius_m: crown_mm * 1e-3,
+        apex_m,
+    };
+    Ok(Gel::digit_crowned(path, material, Some(&crown))?)
 }
 
 /// The FEM displacement fields of the set-up `s` tilted by `tilt` (degrees about the indenter's
@@ -928,13 +1031,13 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     use ocm_tactile::real::{self, CompareOptions, MaskOptions};
     let t_start = std::time::Instant::now();
     // The candidates: as given, else from --fit's map.json, else the defaults.
-    let given = [&a.threshold, &a.pitch_deg, &a.roll_deg]
+    let given = [&a.threshold, &a.pitch_deg, &a.roll_deg, &a.crown_radius_mm]
         .iter()
         .map(|v| v.as_ref().map_or(1, Vec::len))
         .product::<usize>();
     if a.fit.is_some() && given > 1 {
         bail!(
-            "--fit reuses a fitted map: give the tilt and threshold it was fitted with as one --pitch-deg, --roll-deg and --threshold, or none (got {given} candidates)"
+            "--fit reuses a fitted map: give the tilt, crown and threshold it was fitted with as one --pitch-deg, --roll-deg, --crown-radius-mm and --threshold, or none (got {given} candidates)"
         );
     }
     let saved = a.fit.as_deref().map(read_map_json).transpose()?;
@@ -944,23 +1047,49 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             .and_then(|v| v.pointer(key))
             .and_then(serde_json::Value::as_f64)
     };
-    let or_saved = |given: &Option<Vec<f64>>, key: &str, default: &[f64]| -> Vec<f64> {
-        match (given, &saved) {
+    // As given, else from map.json, else the defaults. A map.json that lacks the key predates
+    // that candidate: it was made with `before` (the fixed mask threshold, no tilt, a flat gel).
+    let or_saved =
+        |given: &Option<Vec<f64>>, key: &str, default: &[f64], before: f64| match (given, &saved) {
             (Some(v), _) => v.clone(),
-            (None, Some(_)) => vec![saved_value(key).unwrap_or(default[0])],
+            (None, Some(_)) => vec![saved_value(key).unwrap_or(before)],
             (None, None) => default.to_vec(),
-        }
-    };
-    let thresholds = or_saved(&a.threshold, "/threshold", &DEFAULT_THRESHOLDS);
-    let tilts: Vec<[f64; 2]> = or_saved(&a.pitch_deg, "/tilt_deg/pitch", &[0.0])
+        };
+    let thresholds = or_saved(
+        &a.threshold,
+        "/threshold",
+        &DEFAULT_THRESHOLDS,
+        real::MaskOptions::default().threshold,
+    );
+    let tilts: Vec<[f64; 2]> = or_saved(&a.pitch_deg, "/tilt_deg/pitch", &[0.0], 0.0)
         .into_iter()
         .flat_map(|p| {
-            or_saved(&a.roll_deg, "/tilt_deg/roll", &[0.0])
+            or_saved(&a.roll_deg, "/tilt_deg/roll", &[0.0], 0.0)
                 .into_iter()
                 .map(move |r| [p, r])
         })
         .collect();
-    let candidates = tilts.len() * thresholds.len();
+    let crowns = or_saved(
+        &a.crown_radius_mm,
+        "/crown_radius_mm",
+        &[DEFAULT_CROWN_RADIUS_MM],
+        0.0,
+    );
+    let saved_apex = saved
+        .as_ref()
+        .and_then(|v| v.pointer("/crown_apex"))
+        .and_then(serde_json::Value::as_str)
+        .map(|n| {
+            <CrownApex as clap::ValueEnum>::from_str(n, false)
+                .map_err(|e| anyhow::anyhow!("map.json: crown_apex {n:?}: {e}"))
+        })
+        .transpose()?;
+    let apex = a.crown_apex.or(saved_apex).unwrap_or(CrownApex::GelCentre);
+    let shapes: Vec<([f64; 2], f64)> = tilts
+        .iter()
+        .flat_map(|&t| crowns.iter().map(move |&c| (t, c)))
+        .collect();
+    let candidates = shapes.len() * thresholds.len();
     let digit = ocm_datadir::data_file(a.data.as_deref(), "digit")?;
     let frames = real::load_frames(&digit.join("real-frames-edge6"), "edge6")?;
     let bg = frames[0].clone();
@@ -968,22 +1097,29 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     let Some(s) = setups.iter().find(|s| s.name == a.setup) else {
         bail!("no set-up named '{}'", a.setup);
     };
-    let gel = Gel::digit(digit.join(mesh_file(a.mesh)), GelMaterial::default())?;
-    let grid = Grid::for_gel(&gel);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     // The FEM of each candidate tilt (from its cache when complete); with more than one
     // candidate (tilt and mask threshold), the map and step offset are fitted against each on
     // the even frames and the best fit is kept; the odd frames score only the one kept.
     let mut tried = Vec::new();
-    let mut best: Option<(usize, f64, Fields, Option<real::MaskFit>)> = None;
+    let mut best: Option<(usize, f64, Gel, Fields, Option<real::MaskFit>)> = None;
     let mut best_iou = f64::NEG_INFINITY;
     let mut fem_seconds = Vec::new();
-    for (i, &tilt) in tilts.iter().enumerate() {
-        let dir = tilt_cache(&a.fem, tilt);
+    for (i, &(tilt, crown)) in shapes.iter().enumerate() {
+        let gel = crowned_gel(
+            &digit.join(mesh_file(a.mesh)),
+            GelMaterial::default(),
+            s,
+            tilt,
+            crown,
+            apex,
+        )?;
+        let grid = Grid::for_gel(&gel);
+        let dir = tilt_cache(&a.fem, tilt, crown, apex);
         let (fields, secs) = edge_fem(&a, &gel, &grid, s, tilt, &dir)?;
         fem_seconds.extend(secs);
         if candidates == 1 {
-            best = Some((i, thresholds[0], fields, None));
+            best = Some((i, thresholds[0], gel, fields, None));
             break;
         }
         let mut kept = None;
@@ -997,15 +1133,16 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             let pb = bar(
                 1,
                 &format!(
-                    "map fit: pitch {} roll {} deg, threshold {threshold}",
+                    "map fit: pitch {} roll {} deg, crown {crown} mm, threshold {threshold}",
                     tilt[0], tilt[1]
                 ),
             );
-            let fit = pairs.fit(lo..=hi)?;
+            let fit = pairs.fit(lo..=hi, a.mm_per_px.map(|v| 1e3 / v))?;
             pb.finish_and_clear();
             tried.push(serde_json::json!({
                 "pitch_deg": tilt[0],
                 "roll_deg": tilt[1],
+                "crown_radius_mm": crown,
                 "threshold": threshold,
                 "fem_cache": dir.display().to_string(),
                 "fit_iou": fit.fit_iou,
@@ -1017,13 +1154,13 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             }
         }
         if let Some((threshold, fit)) = kept {
-            best = Some((i, threshold, fields, Some(fit)));
+            best = Some((i, threshold, gel, fields, Some(fit)));
         }
     }
-    let Some((chosen, threshold, fields, tilt_fit)) = best else {
+    let Some((chosen, threshold, gel, fields, tilt_fit)) = best else {
         bail!("no tilt candidates");
     };
-    let tilt = tilts[chosen];
+    let (tilt, crown) = shapes[chosen];
     let mask_opts = MaskOptions {
         threshold,
         ..MaskOptions::default()
@@ -1052,6 +1189,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         },
         // the tilts' map fits stand (each is what a single run would fit)
         fixed_fit: fixed_fit.or(tilt_fit),
+        px_per_m: a.mm_per_px.map(|v| 1e3 / v),
         ..CompareOptions::default()
     };
     let calib = PolyCalib::from_npz(digit.join(real::DEFAULT_CALIB))?;
@@ -1104,8 +1242,11 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         "nodes": gel.num_nodes(),
         "fem_steps": fields.len(),
         "fem_seconds": fem_seconds,
-        "fem_cache": tilt_cache(&a.fem, tilt).display().to_string(),
+        "fem_cache": tilt_cache(&a.fem, tilt, crown, apex).display().to_string(),
         "tilt_deg": {"pitch": tilt[0], "roll": tilt[1]},
+        "crown_radius_mm": crown,
+        "crown_apex": apex_name(apex),
+        "crowns_tried": crowns,
         "tilts_tried": tried,
         "frames": frames.len(),
         "fit_frames": "even 2..98",
@@ -1159,6 +1300,8 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             "fit_iou": c.fit.fit_iou,
             "threshold": threshold,
             "tilt_deg": {"pitch": tilt[0], "roll": tilt[1]},
+            "crown_radius_mm": crown,
+            "crown_apex": apex_name(apex),
             "gain": c.gain,
             "smooth_px": c.smooth_px,
             "colour": c.colour,

@@ -171,19 +171,31 @@ fn compare_real_candidates_are_checked_before_any_work() {
         "--pitch-deg",
         "finite",
     );
-    // a fitted map belongs to one tilt and threshold; several candidates with it are refused
-    // before the frames, the mesh or the FEM are touched
-    let e = fails(&[
-        "tactile",
-        "compare-real",
-        "--fit",
-        "no-such-map.json",
-        "--roll-deg=-2,0,2",
-        "--data",
-        "no-such-dir",
-    ]);
-    assert!(
-        e.contains("--fit reuses a fitted map") && e.contains("3 candidates"),
-        "{e}"
+    refused_flag(
+        &["tactile", "compare-real", "--crown-radius-mm=20,-5"],
+        "--crown-radius-mm",
+        "must be 0 or more",
     );
+    refused_flag(
+        &["tactile", "compare-real", "--mm-per-px", "0"],
+        "--mm-per-px",
+        "must be greater than 0",
+    );
+    // a fitted map belongs to one tilt, crown and threshold; several candidates with it are
+    // refused before the frames, the mesh or the FEM are touched
+    for (candidates, n) in [("--roll-deg=-2,0,2", 3), ("--crown-radius-mm=0,20", 2)] {
+        let e = fails(&[
+            "tactile",
+            "compare-real",
+            "--fit",
+            "no-such-map.json",
+            candidates,
+            "--data",
+            "no-such-dir",
+        ]);
+        assert!(
+            e.contains("--fit reuses a fitted map") && e.contains(&format!("{n} candidates")),
+            "{e}"
+        );
+    }
 }

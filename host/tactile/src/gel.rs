@@ -82,6 +82,21 @@ impl Gel {
         Self::from_vtk(path, material, DIGIT_BASE_Z_M)
     }
 
+    /// The DIGIT gel at `path` with its top face shaped by `crown` (flat when None) and its
+    /// base fixed (z <= 0.5 mm).
+    pub fn digit_crowned(
+        path: impl AsRef<Path>,
+        material: GelMaterial,
+        crown: Option<&Crown>,
+    ) -> Result<Self> {
+        let mut mesh = ocm_fem::mesh::vtk::read_path(path)?;
+        mesh.remove_unused_points();
+        if let Some(c) = crown {
+            c.apply(&mut mesh, DIGIT_BASE_Z_M)?;
+        }
+        Self::from_mesh(mesh, material, DIGIT_BASE_Z_M)
+    }
+
     /// Builds the gel from a tet mesh in metres; nodes with z <= `base_z_m` are fixed.
     pub fn from_mesh(mesh: Mesh, material: GelMaterial, base_z_m: f64) -> Result<Self> {
         let gel = Self::with_constraints(mesh, material, |p| [p.z <= base_z_m; 3])?;
@@ -132,7 +147,7 @@ impl Gel {
             .iter()
             .map(|p| p[2])
             .fold(f64::NEG_INFINITY, f64::max);
-        // The top face: boundary triangles facing up (the DIGIT tip is slightly convex).
+        // The top face: boundary triangles facing up (a crowned top is not level).
         let top_triangles: Vec<[usize; 3]> = mesh
             .triangles
             .iter()
@@ -180,5 +195,149 @@ impl Gel {
             }
         }
         (lo, hi)
+    }
+}
+
+/// A convex crown of the gel's top face: the surface falls away from an apex as a paraboloid
+/// of the given radius of curvature (a sphere's second-order form). Real DIGIT gels are domed
+/// (TACTO models theirs as a sphere), while the meshes in the data are flat boxes.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Crown {
+    /// Radius of curvature at the apex, m.
+    pub radius_m: f64,
+    /// Apex (x, y), m.
+    pub apex_m: [f64; 2],
+}
+
+/// Largest drop of a crowned top face, as a share of the gel's thickness above its fixed base:
+/// farther out the crown is flat, so that no element is squeezed to less than half its height.
+pub const CROWN_MAX_DROP_SHARE: f64 = 0.5;
+
+impl Crown {
+    /// Drop of the top face below the apex at (x, y) before the cap, m.
+    pub fn drop_m(&self, x: f64, y: f64) -> f64 {
+        let (dx, dy) = (x - self.apex_m[0], y - self.apex_m[1]);
+        (dx * dx + dy * dy) / (2.0 * self.radius_m)
+    }
+
+    /// Shapes `mesh` (metres): every node above `base_z_m` moves down by the drop under it
+    /// (capped at [`CROWN_MAX_DROP_SHARE`] of the thickness above the base) times its height
+    /// above the base over the top's, so the base stays where it is and each column of the gel
+    /// is squeezed evenly. The shaped gel is the stress-free reference. A radius that is not
+    /// finite and positive, or an apex that is not finite, is an error.
+    pub fn apply(&self, mesh: &mut Mesh, base_z_m: f64) -> Result<()> {
+        if !(self.radius_m > 0.0) || !self.radius_m.is_finite() {
+            return Err(TactileError::Input(format!(
+                "the crown's radius must be finite and positive (got {} m)",
+                self.radius_m
+            )));
+        }
+        if !self.apex_m.iter().all(|v| v.is_finite()) {
+            return Err(TactileError::Input(format!(
+                "the crown's apex must be finite (got {:?} m)",
+                self.apex_m
+            )));
+        }
+        let z_top = mesh
+            .points
+            .iter()
+            .map(|p| p[2])
+            .fold(f64::NEG_INFINITY, f64::max);
+        let free = z_top - base_z_m;
+        if !(free > 0.0) {
+            return Err(TactileError::Input(format!(
+                "the gel's top ({:.3} mm) is not above its base ({:.3} mm): nothing to crown",
+                z_top * 1e3,
+                base_z_m * 1e3
+            )));
+        }
+        let cap = CROWN_MAX_DROP_SHARE * free;
+        for p in &mut mesh.points {
+            if p[2] > base_z_m {
+                let drop = self.drop_m(p[0], p[1]).min(cap);
+                p[2] -= drop * (p[2] - base_z_m) / free;
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn signed_volume(m: &Mesh, t: [usize; 4]) -> f64 {
+        let p = t.map(|i| nalgebra::Vector3::from(m.points[i]));
+        (p[1] - p[0]).cross(&(p[2] - p[0])).dot(&(p[3] - p[0])) / 6.0
+    }
+
+    /// On a 4 x 4 x 2 mm box the top face follows the paraboloid up to the cap, the base does
+    /// not move, every column is squeezed evenly and no tet turns over.
+    #[test]
+    fn crown_shapes_the_top_and_keeps_the_base() {
+        let flat = ocm_fem::mesh::generate::box_mesh([8, 8, 4], [4e-3, 4e-3, 2e-3]);
+        let base = 0.5e-3;
+        let crown = Crown {
+            radius_m: 5e-3,
+            apex_m: [1e-3, 2e-3],
+        };
+        let mut m = flat.clone();
+        crown.apply(&mut m, base).unwrap();
+        let cap = CROWN_MAX_DROP_SHARE * 1.5e-3;
+        let mut capped = 0;
+        for (p, q) in flat.points.iter().zip(&m.points) {
+            assert_eq!([p[0], p[1]], [q[0], q[1]]);
+            let drop = ((p[0] - 1e-3).powi(2) + (p[1] - 2e-3).powi(2)) / 10e-3;
+            if p[2] <= base {
+                assert_eq!(p[2], q[2]);
+            } else {
+                let want = p[2] - drop.min(cap) * (p[2] - base) / 1.5e-3;
+                assert!((q[2] - want).abs() < 1e-15, "{p:?} -> {q:?}");
+            }
+            if p[2] == 2e-3 && drop > cap {
+                capped += 1;
+            }
+        }
+        // The far corner is 3.6 mm from the apex (drop 1.3 mm): the cap is reached.
+        assert!(capped > 0);
+        let apex = m
+            .points
+            .iter()
+            .position(|q| q[0] == 1e-3 && q[1] == 2e-3 && q[2] == 2e-3);
+        assert!(apex.is_some(), "the apex stays at the top");
+        for t in &flat.tets {
+            let (v0, v1) = (signed_volume(&flat, *t), signed_volume(&m, *t));
+            assert!(v0.signum() == v1.signum() && v1.abs() > 0.25 * v0.abs());
+        }
+    }
+
+    /// A radius that is not positive or finite, or a non-finite apex, is refused.
+    #[test]
+    fn crown_refuses_bad_parameters() {
+        let mut m = ocm_fem::mesh::generate::box_mesh([2, 2, 2], [1e-3, 1e-3, 1e-3]);
+        for (r, a) in [
+            (0.0, [0.0, 0.0]),
+            (-1.0, [0.0, 0.0]),
+            (f64::NAN, [0.0, 0.0]),
+            (f64::INFINITY, [0.0, 0.0]),
+            (1.0, [f64::NAN, 0.0]),
+        ] {
+            let c = Crown {
+                radius_m: r,
+                apex_m: a,
+            };
+            let e = c.apply(&mut m, 0.0).unwrap_err().to_string();
+            assert!(e.contains("crown"), "{e}");
+        }
+        let c = Crown {
+            radius_m: 1.0,
+            apex_m: [0.0, 0.0],
+        };
+        assert!(
+            c.apply(&mut m, 2e-3)
+                .unwrap_err()
+                .to_string()
+                .contains("base")
+        );
     }
 }

@@ -371,9 +371,9 @@ fn mean_iou(pairs: &[(Boxed, Boxed)], map: &CameraMap) -> f64 {
     if n == 0 { 0.0 } else { s / n as f64 }
 }
 
-/// Compass (pattern) search maximising `f` from `x0` with initial steps `step`; the IoU is
-/// piecewise constant, so no gradients. Steps halve when no move improves, until all are below
-/// `tol` times their start.
+/// Compass (pattern) search maximising `f` from `x0` with initial steps `step` (a zero step
+/// holds its coordinate); the IoU is piecewise constant, so no gradients. Steps halve when no
+/// move improves, until all are below `tol` times their start.
 fn compass_max(f: &dyn Fn(&[f64]) -> f64, x0: &[f64], step: &[f64], tol: f64) -> (Vec<f64>, f64) {
     let mut x = x0.to_vec();
     let mut fx = f(&x);
@@ -381,6 +381,9 @@ fn compass_max(f: &dyn Fn(&[f64]) -> f64, x0: &[f64], step: &[f64], tol: f64) ->
     for _ in 0..400 {
         let mut moved = false;
         for i in 0..x.len() {
+            if h[i] == 0.0 {
+                continue;
+            }
             for sgn in [1.0, -1.0] {
                 let mut y = x.clone();
                 y[i] += sgn * h[i];
@@ -410,12 +413,14 @@ fn compass_max(f: &dyn Fn(&[f64]) -> f64, x0: &[f64], step: &[f64], tol: f64) ->
 /// mask IoU. `fem[j]` is the gel-grid mask of FEM step j + 1; real frame k pairs with step
 /// k - offset (an empty mask below 1). `offsets` lists the offsets tried. Every offset, mirror
 /// and half-turn starts from second moments and is searched on every other fitting frame; the
-/// best is refined on all of them.
+/// best is refined on all of them. `px_per_m` fixes the scale (pixels per metre of gel) instead
+/// of fitting it.
 pub fn fit_map(
     real: &[Mask],
     fem: &[Mask],
     fit: &[usize],
     offsets: std::ops::RangeInclusive<usize>,
+    px_per_m: Option<f64>,
 ) -> Result<MaskFit> {
     use rayon::prelude::*;
     let Some(gel_grid) = fem.first().map(|m| m.grid) else {
@@ -437,7 +442,7 @@ pub fn fit_map(
             .collect()
     };
     let make = |x: &[f64], mirror: bool| CameraMap {
-        px_per_m: x[0].exp(),
+        px_per_m: px_per_m.unwrap_or(x[0].exp()),
         angle_rad: x[1],
         mirror,
         offset_px: [x[2], x[3]],
@@ -450,7 +455,7 @@ pub fn fit_map(
             continue;
         };
         let (rs, gs) = (rm.mask.stats(), gm.mask.stats());
-        let s0 = (rs.area_m2 / gs.area_m2).sqrt();
+        let s0 = px_per_m.unwrap_or((rs.area_m2 / gs.area_m2).sqrt());
         for mirror in [false, true] {
             let ga = if mirror { -gs.angle_rad } else { gs.angle_rad };
             for flip in [0.0, std::f64::consts::PI] {
@@ -467,7 +472,7 @@ pub fn fit_map(
             }
         }
     }
-    let step = [0.1, 0.1, 8.0, 8.0];
+    let step = [if px_per_m.is_some() { 0.0 } else { 0.1 }, 0.1, 8.0, 8.0];
     let coarse: Vec<(usize, bool, Vec<f64>, f64)> = starts
         .into_par_iter()
         .map(|(o, mirror, x0)| {
@@ -796,6 +801,8 @@ pub struct CompareOptions {
     pub optics: OpticsFit,
     /// A map and offset fitted before (skips the map fit, the slow part).
     pub fixed_fit: Option<MaskFit>,
+    /// The map's scale, pixels per metre of gel, when it is known rather than fitted.
+    pub px_per_m: Option<f64>,
 }
 
 impl Default for CompareOptions {
@@ -806,6 +813,7 @@ impl Default for CompareOptions {
             offset_window: 6,
             optics: OpticsFit::ColourDepth,
             fixed_fit: None,
+            px_per_m: None,
         }
     }
 }
@@ -994,8 +1002,12 @@ impl MaskPairs {
     }
 
     /// The map and step offset fitted on the fitting frames ([`fit_map`]).
-    pub fn fit(&self, offsets: std::ops::RangeInclusive<usize>) -> Result<MaskFit> {
-        fit_map(&self.real, &self.fem, &self.fit_frames, offsets)
+    pub fn fit(
+        &self,
+        offsets: std::ops::RangeInclusive<usize>,
+        px_per_m: Option<f64>,
+    ) -> Result<MaskFit> {
+        fit_map(&self.real, &self.fem, &self.fit_frames, offsets, px_per_m)
     }
 
     /// `fit` scored on the scoring frames ([`score_map`]).
@@ -1022,7 +1034,7 @@ pub fn compare(
     let (lo, hi) = pairs.offsets(opts.offset_window)?;
     let fit = match opts.fixed_fit {
         Some(f) => f,
-        None => pairs.fit(lo..=hi)?,
+        None => pairs.fit(lo..=hi, opts.px_per_m)?,
     };
     let masks = pairs.score(&fit)?;
     progress("rendering");

@@ -201,3 +201,65 @@ fn friction_against_frictionless_on_a_tilted_face() {
     );
     assert!(slips[1] < 0.5 * slips[0]);
 }
+
+/// A flat plate pressed into a crowned block touches it around the apex first: at depth delta
+/// every node carrying contact force lies within the geometric overlap of the paraboloid,
+/// sqrt(2 R delta), plus one element of the apex, while on the flat block the same plate
+/// presses nodes out to the block's corners.
+#[test]
+fn a_crowned_gel_is_pressed_from_its_apex_outwards() {
+    use ocm_tactile::gel::Crown;
+    let material = GelMaterial {
+        young_pa: E,
+        poisson: NU,
+    };
+    let apex = [2e-3, 2e-3];
+    let radius = 10e-3;
+    let flat = ocm_fem::mesh::generate::box_mesh([8, 8, 4], [4e-3, 4e-3, 2e-3]);
+    let mut crowned = flat.clone();
+    Crown {
+        radius_m: radius,
+        apex_m: apex,
+    }
+    .apply(&mut crowned, 1e-9)
+    .unwrap();
+    let plate = shapes::block(4e-3, 4e-3, 1e-3).unwrap();
+    let place = Placement {
+        xy_m: apex,
+        euler_deg: [0.0; 3],
+    };
+    // Distance from the apex of the farthest node carrying contact force at each depth.
+    let reach = |mesh: ocm_fem::mesh::Mesh, depths: &[f64]| -> Vec<f64> {
+        let gel = Gel::from_mesh(mesh, material, 1e-9).unwrap();
+        let mut ind = Indentation::new("crown", &gel, &plate, place, options(1, 0.02e-3)).unwrap();
+        depths
+            .iter()
+            .map(|&d| {
+                let s = ind.advance_to(d).unwrap();
+                assert!(s.active_nodes > 0, "depth {d}: no contact");
+                s.contact_force
+                    .iter()
+                    .zip(&gel.mesh.points)
+                    .filter(|(f, _)| f[2].abs() > 0.0)
+                    .map(|(_, p)| (p[0] - apex[0]).hypot(p[1] - apex[1]))
+                    .fold(0.0, f64::max)
+            })
+            .collect()
+    };
+    let depths = [0.02e-3, 0.06e-3];
+    let crowned_reach = reach(crowned, &depths);
+    let element = 0.5e-3 * 2f64.sqrt();
+    for (d, r) in depths.iter().zip(&crowned_reach) {
+        let geometric = (2.0 * radius * d).sqrt();
+        assert!(
+            *r <= geometric + element,
+            "depth {d}: contact reaches {r} m from the apex (overlap {geometric} m)"
+        );
+    }
+    assert!(crowned_reach[1] > crowned_reach[0], "{crowned_reach:?}");
+    let flat_reach = reach(flat, &depths[..1]);
+    assert!(
+        flat_reach[0] > 2.5e-3,
+        "the flat block is pressed all over: {flat_reach:?}"
+    );
+}

@@ -384,7 +384,7 @@ fn map_fit_recovers_a_known_map() {
         .collect();
     let fit: Vec<usize> = (1..=30).filter(|k| k % 2 == 0).collect();
     let score: Vec<usize> = (1..=30).filter(|k| k % 2 == 1).collect();
-    let f = real::fit_map(&real_masks, &fem, &fit, 1..=5).unwrap();
+    let f = real::fit_map(&real_masks, &fem, &fit, 1..=5, None).unwrap();
     assert_eq!(f.offset_steps, offset);
     assert!(f.fit_iou > 0.95, "{}", f.fit_iou);
     let s = real::score_map(&real_masks, &fem, &f, &score).unwrap();
@@ -413,10 +413,30 @@ fn map_fit_recovers_a_known_map() {
     };
     let (lo, hi) = pairs.offsets(1).unwrap();
     assert!((lo..=hi).contains(&offset), "{lo}..={hi}");
-    let f = pairs.fit(lo..=hi).unwrap();
+    let f = pairs.fit(lo..=hi, None).unwrap();
     assert_eq!(f.offset_steps, offset);
     let s = pairs.score(&f).unwrap();
     assert!(s.iter().all(|m| m.iou > 0.9), "{s:?}");
+
+    // A scale that is known is kept: the true one fits as well as a free fit, a wrong one
+    // (20 % too large) cannot reach it even though the step offset partly makes up for it.
+    let held = pairs.fit(lo..=hi, Some(truth.px_per_m)).unwrap();
+    assert_eq!(held.map.px_per_m, truth.px_per_m);
+    // (frame 2's noise pixels cost every fit here one fitting pair: 1/15 of the mean)
+    assert!(
+        held.fit_iou >= f.fit_iou - 0.005,
+        "{} against {}",
+        held.fit_iou,
+        f.fit_iou
+    );
+    let wrong = pairs.fit(lo..=hi, Some(1.2 * truth.px_per_m)).unwrap();
+    assert_eq!(wrong.map.px_per_m, 1.2 * truth.px_per_m);
+    assert!(
+        wrong.fit_iou < held.fit_iou - 0.03,
+        "{} against {}",
+        wrong.fit_iou,
+        held.fit_iou
+    );
 }
 
 /// The real calibration loads with its 125 bins; the real frames load at 240 x 320; the frame
