@@ -160,11 +160,11 @@ pub enum TactileCommand {
         #[arg(long, value_delimiter = ',', allow_hyphen_values = true,
               value_parser = crate::arg_check::finite)]
         roll_deg: Option<Vec<f64>>,
-        /// Candidate crowns of the gel's top face: radius of curvature of a dome whose apex lies
-        /// under the middle of the indenter's tip, mm, comma-separated; 0 is the flat gel of the
-        /// mesh. Real DIGIT gels are domed; each candidate, crossed with the tilts, is a FEM run
-        /// of its own (cached beside --fem) and the best fit on the even frames is kept
-        /// (default 0; with --fit, the one in its map.json).
+        /// Candidate crowns of the gel's top face: radius of curvature of a dome (apex: see
+        /// --crown-apex), mm, comma-separated; 0 is the flat gel of the mesh. Real DIGIT gels
+        /// are domed; each candidate, crossed with the tilts, is a FEM run of its own (cached
+        /// beside --fem) and the best fit on the even frames is kept (default 20, fitted on
+        /// these frames; with --fit, the one in its map.json).
         #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::non_negative)]
         crown_radius_mm: Option<Vec<f64>>,
         /// Where the crown's apex lies: at the centre of the gel's top face, or under the middle
@@ -909,7 +909,7 @@ type Fields = Vec<Vec<[f64; 3]>>;
 
 /// The FEM cache of a candidate tilt and crown radius (mm, 0: flat): `fem` itself untilted
 /// and flat, else a sibling folder named after them.
-fn tilt_cache(fem: &Path, tilt: [f64; 2], crown_mm: f64, apex: CrownApex) -> PathBuf {
+fn shape_cache(fem: &Path, tilt: [f64; 2], crown_mm: f64, apex: CrownApex) -> PathBuf {
     if tilt == [0.0, 0.0] && crown_mm == 0.0 {
         return fem.to_path_buf();
     }
@@ -1115,7 +1115,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             apex,
         )?;
         let grid = Grid::for_gel(&gel);
-        let dir = tilt_cache(&a.fem, tilt, crown, apex);
+        let dir = shape_cache(&a.fem, tilt, crown, apex);
         let (fields, secs) = edge_fem(&a, &gel, &grid, s, tilt, &dir)?;
         fem_seconds.extend(secs);
         if candidates == 1 {
@@ -1242,7 +1242,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         "nodes": gel.num_nodes(),
         "fem_steps": fields.len(),
         "fem_seconds": fem_seconds,
-        "fem_cache": tilt_cache(&a.fem, tilt, crown, apex).display().to_string(),
+        "fem_cache": shape_cache(&a.fem, tilt, crown, apex).display().to_string(),
         "tilt_deg": {"pitch": tilt[0], "roll": tilt[1]},
         "crown_radius_mm": crown,
         "crown_apex": apex_name(apex),
