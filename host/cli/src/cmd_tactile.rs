@@ -63,7 +63,7 @@ pub enum TactileCommand {
         #[arg(long, default_value_t = 0.45)]
         poisson: f64,
         /// Crown of the gel's top face: radius of curvature of a dome centred on the top face,
-        /// mm (0: the flat mesh). `compare-real` fits 20 mm on the real edge6 frames.
+        /// mm (0: the flat mesh). `compare-real` fits 14 mm on the real edge6 frames.
         #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 0.0)]
         crown_radius_mm: f64,
         /// Write a VTK file every this many steps (0: none; the last step always).
@@ -162,9 +162,11 @@ pub enum TactileCommand {
         roll_deg: Option<Vec<f64>>,
         /// Candidate crowns of the gel's top face: radius of curvature of a dome (apex: see
         /// --crown-apex), mm, comma-separated; 0 is the flat gel of the mesh. Real DIGIT gels
-        /// are domed; each candidate, crossed with the tilts, is a FEM run of its own (cached
-        /// beside --fem) and the best fit on the even frames is kept (default 20, fitted on
-        /// these frames; with --fit, the one in its map.json).
+        /// are domed; the dome is flat beyond 0.7 of the gel's free thickness below its apex
+        /// (1.05 mm on the DIGIT gel, past the protocol's 1 mm). Each candidate, crossed with
+        /// the tilts, is a FEM run of its own (cached beside --fem) and the best fit on the even
+        /// frames is kept (default 14, fitted on these frames; with --fit, the one in its
+        /// map.json).
         #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::non_negative)]
         crown_radius_mm: Option<Vec<f64>>,
         /// Where the crown's apex lies: at the centre of the gel's top face, or under the middle
@@ -894,8 +896,8 @@ fn mean(v: &[f64]) -> f64 {
 const DEFAULT_THRESHOLDS: [f64; 4] = [6.0, 7.0, 8.0, 10.0];
 
 /// Crown radius of the gel `compare-real` assumes by default, mm: fitted on the edge6 frames
-/// among 11-30 mm with the apex at the gel's centre (see the tactile README).
-const DEFAULT_CROWN_RADIUS_MM: f64 = 20.0;
+/// among 10-25 mm with the apex at the gel's centre (see the tactile README).
+const DEFAULT_CROWN_RADIUS_MM: f64 = 14.0;
 
 /// The name `--crown-apex` takes for `apex`.
 fn apex_name(apex: CrownApex) -> String {
@@ -921,7 +923,11 @@ fn shape_cache(fem: &Path, tilt: [f64; 2], crown_mm: f64, apex: CrownApex) -> Pa
         name = format!("{name}-pitch{}-roll{}", tilt[0], tilt[1]);
     }
     if crown_mm != 0.0 {
-        name = format!("{name}-crown{crown_mm}");
+        // The cap is part of the shape: caches made with another cap are not reused.
+        name = format!(
+            "{name}-crown{crown_mm}-cap{}",
+            ocm_tactile::gel::CROWN_MAX_DROP_SHARE
+        );
         if apex == CrownApex::GelCentre {
             name.push_str("-centre");
         }
@@ -1075,6 +1081,20 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         &[DEFAULT_CROWN_RADIUS_MM],
         0.0,
     );
+    // A map fitted on a crown with another cap belongs to another gel shape. Maps that lack the
+    // key were made with the first cap, 0.5.
+    if let (Some(p), Some(_)) = (&a.fit, &saved)
+        && crowns.iter().any(|&c| c != 0.0)
+    {
+        let cap = saved_value("/crown_cap_share").unwrap_or(0.5);
+        let now = ocm_tactile::gel::CROWN_MAX_DROP_SHARE;
+        if cap != now {
+            bail!(
+                "{}: the map was fitted on a crown capped at {cap} of the gel's free thickness; this version caps it at {now}, a different gel shape: rerun compare-real without --fit",
+                p.display()
+            );
+        }
+    }
     let saved_apex = saved
         .as_ref()
         .and_then(|v| v.pointer("/crown_apex"))
@@ -1246,6 +1266,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         "tilt_deg": {"pitch": tilt[0], "roll": tilt[1]},
         "crown_radius_mm": crown,
         "crown_apex": apex_name(apex),
+        "crown_cap_share": ocm_tactile::gel::CROWN_MAX_DROP_SHARE,
         "crowns_tried": crowns,
         "tilts_tried": tried,
         "frames": frames.len(),
@@ -1302,6 +1323,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             "tilt_deg": {"pitch": tilt[0], "roll": tilt[1]},
             "crown_radius_mm": crown,
             "crown_apex": apex_name(apex),
+            "crown_cap_share": ocm_tactile::gel::CROWN_MAX_DROP_SHARE,
             "gain": c.gain,
             "smooth_px": c.smooth_px,
             "colour": c.colour,

@@ -198,4 +198,33 @@ fn compare_real_candidates_are_checked_before_any_work() {
             "{e}"
         );
     }
+    // a map fitted on a crown of another cap (one without the key predates the cap's change
+    // from 0.5) belongs to another gel shape: refused before the data are read; a flat map
+    // has no cap and passes this check (then fails on the missing data directory)
+    let map = std::env::temp_dir().join(format!("ocm-old-map-{}.json", std::process::id()));
+    for (json, refused) in [
+        (r#"{"crown_radius_mm": 20, "offset_steps": 11}"#, true),
+        (
+            r#"{"crown_radius_mm": 20, "crown_cap_share": 0.5, "offset_steps": 11}"#,
+            true,
+        ),
+        (r#"{"crown_radius_mm": 0, "offset_steps": 11}"#, false),
+    ] {
+        std::fs::write(&map, json).unwrap();
+        let e = fails(&[
+            "tactile",
+            "compare-real",
+            "--fit",
+            map.to_str().unwrap(),
+            "--data",
+            "no-such-dir",
+        ]);
+        assert_eq!(
+            e.contains("capped at 0.5") && e.contains("rerun compare-real without --fit"),
+            refused,
+            "{json}: {e}"
+        );
+        assert_eq!(e.contains("no-such-dir"), !refused, "{json}: {e}");
+    }
+    let _ = std::fs::remove_file(&map);
 }

@@ -200,7 +200,7 @@ impl Gel {
 
 /// A convex crown of the gel's top face: the surface falls away from an apex as a paraboloid
 /// of the given radius of curvature (a sphere's second-order form). Real DIGIT gels are domed
-/// (TACTO models theirs as a sphere), while the meshes in the data are flat boxes.
+/// (TACTO models theirs as a sphere), while the fine mesh in the data is a flat box.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Crown {
     /// Radius of curvature at the apex, m.
@@ -210,8 +210,12 @@ pub struct Crown {
 }
 
 /// Largest drop of a crowned top face, as a share of the gel's thickness above its fixed base:
-/// farther out the crown is flat, so that no element is squeezed to less than half its height.
-pub const CROWN_MAX_DROP_SHARE: f64 = 0.5;
+/// farther out the crown is flat, so that no element is squeezed to less than 30 % of its
+/// height. On the DIGIT gel (1.5 mm above the base) the plateau lies 1.05 mm below the apex,
+/// deeper than the protocol's deepest step (1 mm): an indenter that reached it would press
+/// the whole plateau under its edge at once (at 0.5, the edge6 masks grew a spur there from
+/// 0.75 mm on).
+pub const CROWN_MAX_DROP_SHARE: f64 = 0.7;
 
 impl Crown {
     /// Drop of the top face below the apex at (x, y) before the cap, m.

@@ -1,5 +1,5 @@
-//! The DIGIT gel (coarse mesh) pressed by the real indenter STLs of the set-up files, and the
-//! errors for bad inputs.
+//! The DIGIT gel (the coarse mesh; the fine one where named) pressed by the real indenter STLs
+//! of the set-up files, and the errors for bad inputs.
 
 use ocm_datadir::test_data;
 use ocm_tactile::TactileError;
@@ -116,6 +116,39 @@ fn bad_inputs_give_clear_errors() {
     assert!(matches!(e, TactileError::OffGel { .. }), "{e}");
     assert!(e.to_string().contains("far") && e.to_string().contains("touches no"));
     std::fs::remove_dir_all(&tmp).ok();
+}
+
+/// The DIGIT_v8 gel that `compare-real` crowns (14 mm, apex at the top's centre) keeps its
+/// plateau, where the crown is capped, deeper below the apex than the protocol's deepest step:
+/// a pressed indenter meets the dome, never the plateau's flat rim at once.
+#[test]
+fn the_protocol_stays_off_the_crowns_plateau() {
+    let Some(mesh) = test_data("digit/DIGIT_v8.vtk") else {
+        return;
+    };
+    let flat = Gel::digit(&mesh, GelMaterial::default()).unwrap();
+    let (lo, hi) = flat.top_bounds();
+    let crown = ocm_tactile::gel::Crown {
+        radius_m: 14e-3,
+        apex_m: [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])],
+    };
+    let gel = Gel::digit_crowned(&mesh, GelMaterial::default(), Some(&crown)).unwrap();
+    // the same nodes in both (one mesh file): the flat top's
+    let deepest = flat
+        .top
+        .iter()
+        .map(|&i| flat.mesh.points[i][2] - gel.mesh.points[i][2])
+        .fold(0.0, f64::max);
+    let o = IndentOptions::protocol(gel.material.young_pa);
+    let protocol_m = o.steps as f64 * o.step_m;
+    // the 15 x 20 mm top reaches the cap at 14 mm (5.4 mm from the apex)
+    let cap =
+        ocm_tactile::gel::CROWN_MAX_DROP_SHARE * (flat.z_top - ocm_tactile::gel::DIGIT_BASE_Z_M);
+    assert!((deepest - cap).abs() < 1e-9, "{deepest} {cap}");
+    assert!(
+        deepest > protocol_m,
+        "plateau {deepest} m, protocol {protocol_m} m"
+    );
 }
 
 /// Out-of-range numbers are refused with the parameter's name and value, before any solve:
