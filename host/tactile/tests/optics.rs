@@ -1,6 +1,7 @@
 //! The DIGIT renderer and the real-frame comparison: flat gel = background, a spherical dimple's
 //! slopes and gradient bins against the analytic ones, bad images and calibration files, the
-//! measured mask of a known blob, the map fit on a constructed case, and the real data.
+//! measured mask of a known blob, the map fit on a constructed case, the whole comparison on
+//! frames rendered from known fields, and the real data.
 
 use ocm_datadir::test_data;
 use ocm_tactile::TactileError;
@@ -613,4 +614,98 @@ fn colour_transform_and_depth_shading_are_recovered() {
             "{gf:?} vs {g:?}"
         );
     }
+}
+
+/// `real::compare` end to end on frames it can match exactly: fields of a known L-shaped
+/// dimple (three bumps of unequal depth, so no rotation or mirror maps the contact onto
+/// itself) on a box gel, rendered through a known camera map with a known step offset, colour
+/// transform and depth shading, stand in for the real frames. The comparison must find the offset,
+/// put the dimple where the map put it, and re-render the scored frames close to the "real"
+/// ones, far closer than the background alone (measured: PSNR 47 dB against 27.5, contact
+/// SSIM 0.982 against 0.816, mask IoU 0.93).
+#[test]
+fn compare_matches_frames_rendered_from_its_own_fields() {
+    let mesh = ocm_fem::mesh::generate::box_mesh([24, 30, 4], [12e-3, 15e-3, 2e-3]);
+    let base = 0.5e-3;
+    let gel = Gel::from_mesh(mesh, GelMaterial::default(), base).unwrap();
+    let free = gel.z_top - base;
+    let bumps = [
+        ([5.5e-3, 7.0e-3], 1.0, 1.2e-3),
+        ([7.8e-3, 7.0e-3], 0.7, 0.9e-3),
+        ([5.5e-3, 9.0e-3], 0.5, 0.8e-3),
+    ];
+    let steps = 30;
+    let fields: Vec<Vec<[f64; 3]>> = (1..=steps)
+        .map(|j| {
+            let depth = 15e-6 * j as f64;
+            gel.mesh
+                .points
+                .iter()
+                .map(|p| {
+                    let uz: f64 = bumps
+                        .iter()
+                        .map(|(c, w, s)| {
+                            let d2 = (p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2);
+                            w * (-d2 / (s * s)).exp()
+                        })
+                        .sum();
+                    let share = ((p[2] - base) / free).max(0.0);
+                    [0.0, 0.0, -depth * uz * share]
+                })
+                .collect()
+        })
+        .collect();
+    let (rows, cols) = (120, 160);
+    let bg = RgbImage {
+        rows,
+        cols,
+        data: (0..rows * cols)
+            .flat_map(|i| {
+                let (r, c) = (i / cols, i % cols);
+                [200 + (r / 8) as u8, 190 + (c / 10) as u8, 180]
+            })
+            .collect(),
+    };
+    let truth = CameraMap {
+        px_per_m: 1.0 / 0.08e-3,
+        angle_rad: 0.4,
+        mirror: false,
+        offset_px: [20.0, -30.0],
+    };
+    let mut made = Renderer::new(bin_table(), &bg).unwrap();
+    // Darkening with depth sets the measured contact: 10 grey levels (the mask threshold) at
+    // 30 um, the FEM mask's level; the slopes tint it.
+    made.colour = [[0.1, 0.05, 0.0], [0.0, 0.1, 0.0], [0.05, 0.0, 0.1]];
+    made.depth_gain = [-10.0 / 30e-6; 3];
+    let sampler = SurfaceSampler::new(&gel, rows, cols, &truth);
+    let offset = 4;
+    let frames: Vec<RgbImage> = (0..=steps + offset)
+        .map(|k| real::render_paired(&made, &sampler, &fields, offset, k).unwrap())
+        .collect();
+    let mut renderer = Renderer::new(bin_table(), &bg).unwrap();
+    let opts = real::CompareOptions {
+        offset_window: 3,
+        ..real::CompareOptions::default()
+    };
+    let c = real::compare(&gel, &fields, &frames, &mut renderer, &opts, &mut |_| {}).unwrap();
+    assert_eq!(c.fit.offset_steps, offset);
+    assert!(c.fit.fit_iou > 0.85, "{}", c.fit.fit_iou);
+    // the deepest bump's centre lands where the true map puts it
+    let (t, f) = (truth.to_px(bumps[0].0), c.fit.map.to_px(bumps[0].0));
+    assert!((t[0] - f[0]).hypot(t[1] - f[1]) < 3.0, "{t:?} vs {f:?}");
+    assert!((c.fit.map.px_per_m / truth.px_per_m - 1.0).abs() < 0.05);
+    assert!(!c.fit.map.mirror && (c.fit.map.angle_rad - truth.angle_rad).abs() < 0.1);
+    let med = |v: Vec<f64>| {
+        let mut v = v;
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let psnr = med(c.render.iter().map(|r| r.psnr_db).collect());
+    let psnr_bg = med(c.background_only.iter().map(|r| r.psnr_db).collect());
+    let contact = |v: &[real::RenderScore]| med(v.iter().filter_map(|r| r.contact_ssim).collect());
+    let (ssim, ssim_bg) = (contact(&c.render), contact(&c.background_only));
+    let iou = med(c.masks.iter().map(|m| m.iou).collect());
+    assert!(iou > 0.9, "{:?}", c.masks);
+    assert!(psnr > 40.0 && psnr > psnr_bg + 10.0, "{psnr} vs {psnr_bg}");
+    assert!(ssim > 0.97 && ssim > ssim_bg + 0.1, "{ssim} vs {ssim_bg}");
 }
