@@ -16,9 +16,9 @@ use std::path::{Path, PathBuf};
 /// Which gel mesh.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum MeshArg {
-    /// DIGIT_v8.vtk: 10,061 nodes, 43,150 tets.
+    /// DIGIT_v8.vtk: 10,061 nodes, 43,150 tets; a flat 15 x 20 x 2 mm box.
     Fine,
-    /// DIGIT_remesh2.vtk: 441 nodes.
+    /// DIGIT_remesh2.vtk: 441 nodes; its top is domed (18.5 x 25 mm, 4.07 mm at the apex).
     Coarse,
 }
 
@@ -165,8 +165,8 @@ pub enum TactileCommand {
         /// are domed; the dome is flat beyond 0.7 of the gel's free thickness below its apex
         /// (1.05 mm on the DIGIT gel, past the protocol's 1 mm). Each candidate, crossed with
         /// the tilts, is a FEM run of its own (cached beside --fem) and the best fit on the even
-        /// frames is kept (default 14, fitted on these frames; with --fit, the one in its
-        /// map.json).
+        /// frames is kept (default 14 on the fine mesh, fitted on these frames, and 0 on the
+        /// coarse one, whose top is domed already; with --fit, the one in its map.json).
         #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::non_negative)]
         crown_radius_mm: Option<Vec<f64>>,
         /// Where the crown's apex lies: at the centre of the gel's top face, or under the middle
@@ -1075,10 +1075,16 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
                 .map(move |r| [p, r])
         })
         .collect();
+    // The coarse mesh's top is domed already (the fine one is a flat box): it is not crowned
+    // by default.
+    let default_crown = match a.mesh {
+        MeshArg::Fine => DEFAULT_CROWN_RADIUS_MM,
+        MeshArg::Coarse => 0.0,
+    };
     let crowns = or_saved(
         &a.crown_radius_mm,
         "/crown_radius_mm",
-        &[DEFAULT_CROWN_RADIUS_MM],
+        &[default_crown],
         0.0,
     );
     // A map fitted on a crown with another cap belongs to another gel shape. Maps that lack the
