@@ -899,6 +899,10 @@ const DEFAULT_THRESHOLDS: [f64; 4] = [6.0, 7.0, 8.0, 10.0];
 /// among 10-25 mm with the apex at the gel's centre (see the tactile README).
 const DEFAULT_CROWN_RADIUS_MM: f64 = 14.0;
 
+/// The crown's cap (`ocm_tactile::gel::CROWN_MAX_DROP_SHARE`) of the maps written before
+/// `map.json` recorded it.
+const FIRST_CROWN_CAP_SHARE: f64 = 0.5;
+
 /// The name `--crown-apex` takes for `apex`.
 fn apex_name(apex: CrownApex) -> String {
     clap::ValueEnum::to_possible_value(&apex)
@@ -1087,12 +1091,11 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         &[default_crown],
         0.0,
     );
-    // A map fitted on a crown with another cap belongs to another gel shape. Maps that lack the
-    // key were made with the first cap, 0.5.
+    // A map fitted on a crown with another cap belongs to another gel shape.
     if let (Some(p), Some(_)) = (&a.fit, &saved)
         && crowns.iter().any(|&c| c != 0.0)
     {
-        let cap = saved_value("/crown_cap_share").unwrap_or(0.5);
+        let cap = saved_value("/crown_cap_share").unwrap_or(FIRST_CROWN_CAP_SHARE);
         let now = ocm_tactile::gel::CROWN_MAX_DROP_SHARE;
         if cap != now {
             bail!(
