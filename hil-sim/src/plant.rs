@@ -685,6 +685,21 @@ impl Plant {
         s.q.column_lengths(self.d).map(|l| l - rest)
     }
 
+    /// Sensitivity of the plate position to each column's elongation in state `s`,
+    /// `d p_r / d e_j` (rows x, y, z; columns 1-3; metres per metre): the position Jacobian
+    /// times the configuration's linear map from column lengths (eq 3.26). Logged beside the
+    /// elongations so an identification can take the kinematics as exact.
+    pub fn tip_sensitivity_to_elongations(&self, s: &PlantState) -> [[f64; 3]; 3] {
+        let jp = position_jacobian(&s.q);
+        // the map from lengths to (S, bx, by) is linear: its columns are unit lengths' images
+        let dq: [[f64; 3]; 3] = std::array::from_fn(|j| {
+            let mut l = [0.0; 3];
+            l[j] = 1.0;
+            Config::from_column_lengths(l, self.d).to_array()
+        });
+        std::array::from_fn(|r| std::array::from_fn(|j| (0..3).map(|k| jp[r][k] * dq[j][k]).sum()))
+    }
+
     /// Hysteresis force amplitude `F_h` (half the loop width), newtons.
     fn hysteresis_amplitude_n(&self) -> f64 {
         let e = &self.params.effects;

@@ -377,3 +377,38 @@ fn a_setting_out_of_range_is_named_with_its_value() {
     };
     assert!(e.contains("effects.stiffness_spread = -0.1"), "{e}");
 }
+
+/// The logged kinematic sensitivities are the plate position's derivatives in the column
+/// elongations: central differences of the position of the configuration the perturbed
+/// column lengths give (eq 3.26), at a bent pose and at the straight one.
+#[test]
+fn tip_sensitivity_to_elongations_matches_finite_differences() {
+    let p = plant();
+    let load = PlateLoad::default();
+    for q in [
+        Config::from_polar(0.16, 0.35, 0.7),
+        Config::from_polar(0.15, 0.0, 0.0),
+    ] {
+        let s = p.state_at(q, [15_000.0; 3], load);
+        let jac = p.tip_sensitivity_to_elongations(&s);
+        let d = p.params().manipulator.column_radius_m;
+        let l = q.column_lengths(d);
+        let h = 1e-7;
+        for j in 0..3 {
+            let at = |dl: f64| {
+                let mut l2 = l;
+                l2[j] += dl;
+                Config::from_column_lengths(l2, d).position()
+            };
+            let (up, dn) = (at(h), at(-h));
+            for r in 0..3 {
+                let fd = (up[r] - dn[r]) / (2.0 * h);
+                assert!(
+                    (jac[r][j] - fd).abs() < 1e-6,
+                    "d p{r} / d e{j}: {} against {fd}",
+                    jac[r][j]
+                );
+            }
+        }
+    }
+}

@@ -54,6 +54,24 @@ pub struct LogRow {
     pub e2_mm: f64,
     /// Elongation of column 3 from its rest length, mm.
     pub e3_mm: f64,
+    /// Sensitivity of plate x to column 1's elongation, mm per mm.
+    pub dx_de1: f64,
+    /// Sensitivity of plate x to column 2's elongation, mm per mm.
+    pub dx_de2: f64,
+    /// Sensitivity of plate x to column 3's elongation, mm per mm.
+    pub dx_de3: f64,
+    /// Sensitivity of plate y to column 1's elongation, mm per mm.
+    pub dy_de1: f64,
+    /// Sensitivity of plate y to column 2's elongation, mm per mm.
+    pub dy_de2: f64,
+    /// Sensitivity of plate y to column 3's elongation, mm per mm.
+    pub dy_de3: f64,
+    /// Sensitivity of plate z to column 1's elongation, mm per mm.
+    pub dz_de1: f64,
+    /// Sensitivity of plate z to column 2's elongation, mm per mm.
+    pub dz_de2: f64,
+    /// Sensitivity of plate z to column 3's elongation, mm per mm.
+    pub dz_de3: f64,
 }
 
 /// Result of one controller on one scenario.

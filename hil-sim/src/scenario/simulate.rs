@@ -148,6 +148,7 @@ pub(super) fn simulate(
         }
         if logged {
             let e = plant.column_elongations_m(&state);
+            let de = plant.tip_sensitivity_to_elongations(&state);
             log.push(LogRow {
                 t_s: tn,
                 ref_x_mm: rf[0] * 1e3,
@@ -171,6 +172,15 @@ pub(super) fn simulate(
                 e1_mm: e[0] * 1e3,
                 e2_mm: e[1] * 1e3,
                 e3_mm: e[2] * 1e3,
+                dx_de1: de[0][0],
+                dx_de2: de[0][1],
+                dx_de3: de[0][2],
+                dy_de1: de[1][0],
+                dy_de2: de[1][1],
+                dy_de3: de[1][2],
+                dz_de1: de[2][0],
+                dz_de2: de[2][1],
+                dz_de3: de[2][2],
             });
         }
     }

@@ -135,7 +135,10 @@ pub struct IdentArgs {
     /// (another simulator's prediction of y_<name>: then ident explains measured minus
     /// simulated) and x_<name> (its states, e.g. a position whose velocity friction follows;
     /// where the states determine the simulated output, memory, offsets and gains act on them
-    /// too, a gain about the state's zero: log elongations rather than lengths). Units come from the name's suffix (_n, _nm, _m, _mm, _kpa, _pa, _bar, _rad, _deg, _s,
+    /// too, a gain about the state's zero: log elongations rather than lengths), and
+    /// dsim_<output>__<state> (the simulator's own sensitivity d sim_<output> / d x_<state>,
+    /// one per state for an output or none: taken as exact, and offsets and gains of inputs
+    /// and states are then one parameter for all outputs). Units come from the name's suffix (_n, _nm, _m, _mm, _kpa, _pa, _bar, _rad, _deg, _s,
     /// _v). A record that contradicts the conventions gets a warning in the report.
     #[arg(required = true)]
     pub file: Option<PathBuf>,

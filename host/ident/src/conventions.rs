@@ -19,7 +19,7 @@ pub fn conventions(kind: Kind) -> &'static str {
             "pose: tip x_mm, y_mm, z_mm in the base frame of a standing segment, z along the unbent backbone pointing from base to tip (z > 0); load_n is axial tension on the segment; p1..p3_kpa gauge pressures of chambers at 90, 210 and 330 degrees from x (inflation positive). A hanging mount must be rotated into this frame first"
         }
         Kind::Series => {
-            "series: u_<name> inputs, y_<name> measured outputs, optional sim_<name> (a simulator's prediction of y_<name>) and x_<name> (its states; where they determine the simulated output, memory, offsets and gains also act on them, a gain about the state's zero, so log states whose zero is the unloaded configuration, e.g. an elongation rather than a length); values in the file's units, named by the suffix (_n, _m, _mm, _kpa, _pa, _rad, _s); a time that goes backwards starts a new trial"
+            "series: u_<name> inputs, y_<name> measured outputs, optional sim_<name> (a simulator's prediction of y_<name>) and x_<name> (its states; where they determine the simulated output, memory, offsets and gains also act on them, a gain about the state's zero, so log states whose zero is the unloaded configuration, e.g. an elongation rather than a length) and dsim_<output>__<state> (its own sensitivity d sim_<output> / d x_<state>, one per state or none for an output: taken as exact, and then an input's or a state's offset or gain is one parameter for every output); values in the file's units, named by the suffix (_n, _m, _mm, _kpa, _pa, _rad, _s); a time that goes backwards starts a new trial"
         }
     }
 }

@@ -90,6 +90,7 @@ pub fn parse(text: &str, file: &str) -> Result<Record, IdentError> {
         held_out: None,
         simulated: vec![Channel::new("force_n", "N", sim)],
         states: vec![Channel::new("displacement_mm", "mm", x)],
+        sensitivities: Vec::new(),
     };
     rec.validate()?;
     Ok(rec)

@@ -8,7 +8,7 @@
 //! | `axial` | `time_s` (s), `pressure_kpa` (kPa), `strain` (-), `force_n` (N, tension positive) |
 //! | `bending` | `time_s` (s), `strain0` (-), `bend_angle_rad` (rad), `moment_nm` (N m) |
 //! | `pose` | `time_s` (s), `p1_kpa`,`p2_kpa`,`p3_kpa` (kPa), `load_n` (N, axial tension on the segment), `x_mm`,`y_mm`,`z_mm` (mm, tip in the base frame, z along the unbent backbone), optional `qw,qx,qy,qz` (unit quaternion) |
-//! | `series` | `time_s` (s), one or more `u_<name>` inputs, one or more `y_<name>` measured outputs, optional `sim_<name>` (a simulator's prediction of `y_<name>`, one for every output or none) and `x_<name>` (the simulator's states) |
+//! | `series` | `time_s` (s), one or more `u_<name>` inputs, one or more `y_<name>` measured outputs, optional `sim_<name>` (a simulator's prediction of `y_<name>`, one for every output or none), `x_<name>` (the simulator's states) and `dsim_<output>__<state>` (the simulator's sensitivity `d sim_<output> / d x_<state>`, in the output's unit per the state's; for an output, one per state or none) |
 //!
 //! `series` values stay in the file's units; the unit is read from the name's suffix
 //! (`_n` N, `_nm` N m, `_m` m, `_mm` mm, `_kpa` kPa, `_pa` Pa, `_bar` bar, `_rad` rad,
@@ -106,6 +106,38 @@ pub struct Record {
     pub simulated: Vec<Channel>,
     /// The simulator's states (`x_<name>` columns), extra regressors of the extensions.
     pub states: Vec<Channel>,
+    /// The simulator's own sensitivities of its outputs to its states
+    /// (`dsim_<output>__<state>` columns), where it logs them.
+    pub sensitivities: Vec<Sensitivity>,
+}
+
+/// A simulator's logged sensitivity of one output to one state, row by row, in the output's
+/// unit per the state's: what it knows exactly and ident could only estimate from the rows (a
+/// record whose states lie on one curve leaves the derivatives across that curve open).
+#[derive(Debug, Clone, Serialize)]
+pub struct Sensitivity {
+    /// Index into `outputs` (and `simulated`).
+    pub output: usize,
+    /// Index into `states`.
+    pub state: usize,
+    /// `d sim_output / d x_state` per row.
+    pub values: Vec<f64>,
+}
+
+impl Record {
+    /// The logged sensitivities of output `c` to every state, in the order of the states, or
+    /// `None` when the record does not log them for that output.
+    pub fn logged_sensitivities(&self, c: usize) -> Option<Vec<&[f64]>> {
+        let row: Vec<&[f64]> = (0..self.states.len())
+            .filter_map(|j| {
+                self.sensitivities
+                    .iter()
+                    .find(|s| s.output == c && s.state == j)
+                    .map(|s| s.values.as_slice())
+            })
+            .collect();
+        (!row.is_empty() && row.len() == self.states.len()).then_some(row)
+    }
 }
 
 /// Largest magnitude a channel may hold: the extensions cube the inputs and the fits sum
@@ -166,6 +198,33 @@ impl Record {
                 return Err(IdentError::Invalid(format!(
                     "{}: channel {} row {} is {:e}, beyond {MAX_MAGNITUDE:e}: the fits' sums of squares and cubic features would overflow (give the column in a unit that keeps it smaller)",
                     self.source, ch.name, i, ch.values[i]
+                )));
+            }
+        }
+        for sv in &self.sensitivities {
+            let (Some(out), Some(st)) = (self.outputs.get(sv.output), self.states.get(sv.state))
+            else {
+                return Err(IdentError::Invalid(format!(
+                    "{}: a sensitivity names output {} and state {}, beyond the record's {} outputs and {} states",
+                    self.source,
+                    sv.output,
+                    sv.state,
+                    self.outputs.len(),
+                    self.states.len()
+                )));
+            };
+            let name = format!("dsim_{}__{}", out.name, st.name);
+            if sv.values.len() != n {
+                return Err(IdentError::Invalid(format!(
+                    "{}: channel {name} has {} values for {n} rows",
+                    self.source,
+                    sv.values.len()
+                )));
+            }
+            if let Some(i) = sv.values.iter().position(|v| !v.is_finite()) {
+                return Err(IdentError::Invalid(format!(
+                    "{}: channel {name} row {i} is not finite",
+                    self.source
                 )));
             }
         }
@@ -293,7 +352,8 @@ pub fn parse_csv(text: &str, file: &str, kind: Kind) -> Result<Record, IdentErro
         }
         Kind::Series => {
             for (i, h) in headers.iter().enumerate() {
-                for (prefix, role) in [("u_", 0u8), ("y_", 1), ("sim_", 2), ("x_", 3)] {
+                for (prefix, role) in [("u_", 0u8), ("y_", 1), ("sim_", 2), ("x_", 3), ("dsim_", 4)]
+                {
                     if let Some(n) = h.strip_prefix(prefix) {
                         series_names.push((i, n.to_string(), role));
                     }
@@ -337,15 +397,16 @@ pub fn parse_csv(text: &str, file: &str, kind: Kind) -> Result<Record, IdentErro
                                 .into(),
                     });
                 }
-            } else if has(3) {
+            } else if has(3) || has(4) {
                 return Err(IdentError::Parse {
                     file: file.to_string(),
                     line: 1,
                     column: String::new(),
-                    message: "x_* state columns need the simulator's sim_* predictions beside them"
+                    message: "x_* state and dsim_* sensitivity columns need the simulator's sim_* predictions beside them"
                         .into(),
                 });
             }
+            check_sensitivity_names(file, &names(1), &names(3), &names(4))?;
         }
     }
     let t_col = find("time_s")?;
@@ -445,17 +506,33 @@ pub fn parse_csv(text: &str, file: &str, kind: Kind) -> Result<Record, IdentErro
     };
     let mut simulated = Vec::new();
     let mut states = Vec::new();
+    let mut sensitivities = Vec::new();
     let (inputs, outputs, drives) = if kind == Kind::Series {
         let mut ins = Vec::new();
         let mut outs = Vec::new();
         let mut sims = Vec::new();
+        let mut dsims = Vec::new();
         for (j, name, role) in &series_names {
             let ch = Channel::new(name, unit_of(name), std::mem::take(&mut cols[*j]));
             match role {
                 0 => ins.push(ch),
                 1 => outs.push(ch),
                 2 => sims.push(ch),
-                _ => states.push(ch),
+                3 => states.push(ch),
+                _ => dsims.push(ch),
+            }
+        }
+        for d in dsims {
+            // the names were checked against the outputs and states above
+            if let Some((o, x)) = d.name.split_once("__")
+                && let Some(output) = outs.iter().position(|c: &Channel| c.name == o)
+                && let Some(state) = states.iter().position(|c: &Channel| c.name == x)
+            {
+                sensitivities.push(Sensitivity {
+                    output,
+                    state,
+                    values: d.values,
+                });
             }
         }
         // simulated channels in the order of the outputs
@@ -488,9 +565,68 @@ pub fn parse_csv(text: &str, file: &str, kind: Kind) -> Result<Record, IdentErro
         held_out: None,
         simulated,
         states,
+        sensitivities,
     };
     rec.validate()?;
     Ok(rec)
+}
+
+/// Checks the `dsim_<output>__<state>` names of a series header: each names a measured output
+/// and a state, once, and an output with any has one per state.
+fn check_sensitivity_names(
+    file: &str,
+    outputs: &[&str],
+    states: &[&str],
+    dsims: &[&str],
+) -> Result<(), IdentError> {
+    let bad = |column: String, message: String| IdentError::Parse {
+        file: file.to_string(),
+        line: 1,
+        column,
+        message,
+    };
+    let mut seen: Vec<(&str, &str)> = Vec::new();
+    for d in dsims {
+        let column = format!("dsim_{d}");
+        let Some((o, x)) = d.split_once("__") else {
+            return Err(bad(
+                column,
+                "a sensitivity column is named dsim_<output>__<state> (two underscores between the names)".into(),
+            ));
+        };
+        if !outputs.contains(&o) {
+            return Err(bad(
+                column,
+                format!("names the output `{o}`, which has no y_{o} column"),
+            ));
+        }
+        if !states.contains(&x) {
+            return Err(bad(
+                column,
+                format!("names the state `{x}`, which has no x_{x} column"),
+            ));
+        }
+        if seen.contains(&(o, x)) {
+            return Err(bad(column, "appears twice".into()));
+        }
+        seen.push((o, x));
+    }
+    for o in outputs {
+        let missing: Vec<String> = states
+            .iter()
+            .filter(|x| !seen.contains(&(o, x)))
+            .map(|x| format!("dsim_{o}__{x}"))
+            .collect();
+        if missing.len() < states.len() && !missing.is_empty() {
+            return Err(bad(
+                missing.join(","),
+                format!(
+                    "output `{o}` logs its sensitivity to some states but not to these: give one per state or none"
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The unit named by a column name's suffix (`force_n` is in N), `-` when it names none.
@@ -574,6 +710,12 @@ pub fn write_csv(rec: &Record, path: &Path) -> Result<(), IdentError> {
             for c in &rec.states {
                 h.push(format!("x_{}", c.name));
             }
+            for sv in &rec.sensitivities {
+                h.push(format!(
+                    "dsim_{}__{}",
+                    rec.outputs[sv.output].name, rec.states[sv.state].name
+                ));
+            }
             (h, s)
         }
     };
@@ -591,6 +733,9 @@ pub fn write_csv(rec: &Record, path: &Path) -> Result<(), IdentError> {
         }
         for c in rec.simulated.iter().chain(&rec.states) {
             out.push_str(&format!(",{}", c.values[i]));
+        }
+        for sv in &rec.sensitivities {
+            out.push_str(&format!(",{}", sv.values[i]));
         }
         out.push('\n');
     }
@@ -682,5 +827,73 @@ mod tests {
         let r2 = read_csv(&p, Kind::Series).unwrap();
         assert_eq!(r2.outputs[0].values, r.outputs[0].values);
         assert_eq!(r2.segment_starts, r.segment_starts);
+    }
+
+    /// A simulator record with states and, per output, the named sensitivity columns.
+    fn with_sensitivities(dsims: &[&str]) -> String {
+        let mut s = String::from("time_s,u_p,y_a_mm,y_b_mm,sim_a_mm,sim_b_mm,x_e1,x_e2");
+        for d in dsims {
+            s.push_str(&format!(",{d}"));
+        }
+        s.push('\n');
+        for i in 0..25 {
+            s.push_str(&format!(
+                "{i},{i},1,2,1,2,{},{}",
+                0.1 * i as f64,
+                0.2 * i as f64
+            ));
+            for k in 0..dsims.len() {
+                s.push_str(&format!(",{}", 0.5 + k as f64));
+            }
+            s.push('\n');
+        }
+        s
+    }
+
+    #[test]
+    fn sensitivity_columns_are_read_checked_and_round_trip() {
+        let all = [
+            "dsim_a_mm__e1",
+            "dsim_a_mm__e2",
+            "dsim_b_mm__e2",
+            "dsim_b_mm__e1",
+        ];
+        let r = parse_csv(&with_sensitivities(&all), "k.csv", Kind::Series).unwrap();
+        assert_eq!(r.sensitivities.len(), 4);
+        // in the order of the states, whatever the column order
+        let b = r.logged_sensitivities(1).unwrap();
+        assert_eq!((b[0][0], b[1][0]), (3.5, 2.5));
+        // an output may log none while another logs all
+        let r = parse_csv(&with_sensitivities(&all[..2]), "k.csv", Kind::Series).unwrap();
+        assert!(r.logged_sensitivities(0).is_some() && r.logged_sensitivities(1).is_none());
+        let dir = std::env::temp_dir().join(format!("ocm-ident-dsim-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("k.csv");
+        let r = parse_csv(&with_sensitivities(&all), "k.csv", Kind::Series).unwrap();
+        write_csv(&r, &p).unwrap();
+        let r2 = read_csv(&p, Kind::Series).unwrap();
+        for c in 0..2 {
+            assert_eq!(r2.logged_sensitivities(c), r.logged_sensitivities(c));
+        }
+        for (cols, needle) in [
+            (&["dsim_a_mm_e1"][..], "two underscores"),
+            (&["dsim_c_mm__e1"][..], "no y_c_mm column"),
+            (&["dsim_a_mm__e3"][..], "no x_e3 column"),
+            (&["dsim_a_mm__e1", "dsim_a_mm__e1"][..], "appears twice"),
+            (&["dsim_a_mm__e1"][..], "dsim_a_mm__e2"),
+        ] {
+            let e = parse_csv(&with_sensitivities(cols), "k.csv", Kind::Series)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("k.csv") && e.contains(needle), "{cols:?}: {e}");
+        }
+        let e = parse_csv(
+            "time_s,u_p,y_a,dsim_a__e1\n0,0,0,0\n",
+            "n.csv",
+            Kind::Series,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("sim_* predictions"), "{e}");
     }
 }

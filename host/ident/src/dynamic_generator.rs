@@ -304,6 +304,7 @@ pub fn generate(spec: &DynSpec) -> DynGenerated {
         held_out: None,
         simulated: Vec::new(),
         states: Vec::new(),
+        sensitivities: Vec::new(),
     };
     DynGenerated {
         record,

@@ -512,6 +512,7 @@ pub fn generate_scalar(spec: &Spec) -> Generated {
             held_out: None,
             simulated: Vec::new(),
             states: Vec::new(),
+            sensitivities: Vec::new(),
         },
         effects,
         ratios,

@@ -322,6 +322,7 @@ pub(crate) fn generate_pose(spec: &Spec) -> Generated {
             held_out: None,
             simulated: Vec::new(),
             states: Vec::new(),
+            sensitivities: Vec::new(),
         },
         effects,
         ratios,

@@ -459,7 +459,15 @@ pub fn select(prep: &Prepared, cfg: &Config) -> Selection {
                     <= (1.0 - cfg.min_gain_pct / 100.0) * heldout_rmse(prep, &base.pred)
                     && r_swap
                         <= (1.0 + cfg.min_gain_pct / 100.0) * heldout_rmse(prep, &current.pred);
-                let decisive = b < cur_bic - cfg.bic_margin;
+                // on a noise-free record the training criterion is decisive between any two
+                // forms; a swap to more parameters must win held out by the relevance window
+                // (the first cause's rule: a spread of the lab's column stiffnesses, a gain of
+                // 9 parameters, was swapped for the commands' complete cubic of 60 that came
+                // 2 % of the baseline closer)
+                let relevant_swap = !noise_free
+                    || f.extra_params <= cur_k
+                    || heldout_rmse(prep, &current.pred) - r_swap >= window;
+                let decisive = b < cur_bic - cfg.bic_margin && relevant_swap;
                 // Occam's window: when the criterion cannot tell the sets apart (within the
                 // margin), the one with fewer parameters is kept
                 let simpler = f.extra_params < cur_k && b < cur_bic + cfg.bic_margin;

@@ -117,6 +117,7 @@ pub fn load(path: &Path) -> Result<Record, IdentError> {
         held_out: Some(held),
         simulated: Vec::new(),
         states: Vec::new(),
+        sensitivities: Vec::new(),
     };
     rec.validate()?;
     Ok(rec)

@@ -78,6 +78,7 @@ mod tests {
             held_out: None,
             simulated: Vec::new(),
             states: Vec::new(),
+            sensitivities: Vec::new(),
         };
         let h = held_out(&rec);
         let count = h.iter().filter(|v| **v).count();

@@ -80,6 +80,7 @@ fn pose_record(seed: u64, stiffness: f64, lag_s: f64) -> Record {
         held_out: None,
         simulated: Vec::new(),
         states: Vec::new(),
+        sensitivities: Vec::new(),
     }
 }
 

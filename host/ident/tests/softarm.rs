@@ -62,6 +62,7 @@ fn record(actuator: bool, seed: u64) -> Record {
         held_out: None,
         simulated: Vec::new(),
         states: Vec::new(),
+        sensitivities: Vec::new(),
     };
     rec.validate().unwrap();
     rec

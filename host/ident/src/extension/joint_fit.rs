@@ -37,6 +37,117 @@ pub struct SetFit {
     pub actuator_lag_s: Option<f64>,
 }
 
+/// The stacked fit of every output channel at once, where some extension columns are
+/// [`Prepared::shared_columns`]: the channels' rows one below the other, each weighted by
+/// its baseline residual's scale (as the sets' training criterion weighs them), each channel's
+/// own columns (its baseline's regressors and its own extension columns) in a block of its
+/// rows, a shared column's per-channel values stacked into one column. Returned per channel
+/// as the separate fits are: its coefficients (shared values repeated), its training RSS and
+/// predictions; the shared coefficients count among the first channel's degrees of freedom.
+fn fit_stacked(
+    channels: &[super::ChannelFit],
+    feats: &[Features],
+    shared: &[Vec<bool>],
+    train: &[bool],
+    tr: &dyn Fn(&Vec<f64>) -> Vec<f64>,
+) -> ChannelFits {
+    let n = train.len();
+    let m = channels.len();
+    let rows = m * n;
+    let weights: Vec<f64> = channels
+        .iter()
+        .map(|ch| 1.0 / channel_scale(ch, train).sqrt())
+        .collect();
+    let mut cols: Vec<Vec<f64>> = Vec::new();
+    let mut nonneg: Vec<bool> = Vec::new();
+    // per channel: the stacked column of each regressor, baseline's then extension's
+    let mut index: Vec<Vec<usize>> = vec![Vec::new(); m];
+    let mut shared_names: Vec<(String, usize)> = Vec::new();
+    let mut fixed: Vec<Vec<f64>> = Vec::with_capacity(m);
+    let mut own_cols: Vec<Vec<Vec<f64>>> = Vec::with_capacity(m);
+    let mut target = vec![0.0; rows];
+    for (c, ch) in channels.iter().enumerate() {
+        let f = tr(&ch.design.fixed);
+        for i in 0..n {
+            target[c * n + i] = weights[c] * (ch.y[i] - f[i]);
+        }
+        fixed.push(f);
+        let mut mine: Vec<Vec<f64>> = ch.design.regressors.iter().map(tr).collect();
+        mine.extend(feats[c].0.iter().map(tr));
+        let nn: Vec<bool> = ch
+            .design
+            .nonneg
+            .iter()
+            .chain(&feats[c].2)
+            .copied()
+            .collect();
+        let nb = ch.design.regressors.len();
+        for (j, col) in mine.iter().enumerate() {
+            let is_shared = j >= nb && shared[c][j - nb];
+            let at = if is_shared {
+                let name = &feats[c].1[j - nb];
+                match shared_names.iter().find(|(s, _)| s == name) {
+                    Some(&(_, k)) => k,
+                    None => {
+                        cols.push(vec![0.0; rows]);
+                        nonneg.push(nn[j]);
+                        shared_names.push((name.clone(), cols.len() - 1));
+                        cols.len() - 1
+                    }
+                }
+            } else {
+                cols.push(vec![0.0; rows]);
+                nonneg.push(nn[j]);
+                cols.len() - 1
+            };
+            for i in 0..n {
+                cols[at][c * n + i] = weights[c] * col[i];
+            }
+            index[c].push(at);
+        }
+        own_cols.push(mine);
+    }
+    let mask: Vec<bool> = (0..m).flat_map(|_| train.iter().copied()).collect();
+    let refs: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+    let fit = lsq::fit(&refs, &target, &mask, &nonneg);
+    let mut counted = vec![false; cols.len()];
+    let mut out = Vec::with_capacity(m);
+    for (c, ch) in channels.iter().enumerate() {
+        let coef: Vec<f64> = index[c].iter().map(|&k| fit.coef[k]).collect();
+        let std_err: Vec<f64> = index[c].iter().map(|&k| fit.std_err[k]).collect();
+        let mine: Vec<&[f64]> = own_cols[c].iter().map(|v| v.as_slice()).collect();
+        let mut pred = lsq::predict(&mine, &coef, n);
+        for (p, f) in pred.iter_mut().zip(&fixed[c]) {
+            *p += f;
+        }
+        let rss: f64 = (0..n)
+            .filter(|&i| train[i])
+            .map(|i| (ch.y[i] - pred[i]).powi(2))
+            .sum();
+        let mut dof_used = 0;
+        for &k in &index[c] {
+            if !counted[k] && fit.coef[k] != 0.0 {
+                counted[k] = true;
+                dof_used += 1;
+            }
+        }
+        let nb = ch.design.regressors.len();
+        out.push((
+            lsq::LsqFit {
+                coef,
+                std_err,
+                rss,
+                rows: train.iter().filter(|t| **t).count(),
+                dof_used,
+                ill_conditioned: fit.ill_conditioned,
+            },
+            pred,
+            nb,
+        ));
+    }
+    out
+}
+
 /// Time constants (samples) of the Laguerre poles tried by the actuator variant of
 /// `nonlinearity`: with 8 filters each spans a memory of about 16 to 400 samples.
 const ACTUATOR_LAGS: [f64; 4] = [1.0, 3.0, 8.0, 24.0];
@@ -67,6 +178,22 @@ fn earlier(a: Point, b: Point) -> Point {
 }
 
 impl Prepared<'_> {
+    /// Whether the coefficient of extension column `name` of `cause` on channel `c` is one
+    /// parameter for every output channel. On a simulator record with several outputs that
+    /// logs its sensitivities, an input's or a state's offset or gain is one number that
+    /// reaches each output through that output's sensitivity (a regulator's offset moves one
+    /// chamber's pressure whatever coordinate of the tip is watched); fitted per output, each
+    /// cause had three times its parameters and the two fitted each other's effects on the
+    /// lab's circle (see the README). With estimated sensitivities the per-output parameters
+    /// stay: they absorb the estimate's error. Output biases and gains stay per channel; so
+    /// does every other cause.
+    fn shared_column(&self, cause: Cause, c: usize, name: &str) -> bool {
+        self.sensitivities_logged
+            && self.channels.len() > 1
+            && matches!(cause, Cause::Offset | Cause::Gain)
+            && !name.starts_with(self.rec.outputs[c].name.as_str())
+    }
+
     /// Fits the baseline plus the extensions of `causes` jointly on the training rows.
     ///
     /// On a state-space baseline `nonlinearity` has two variants, and the one with the lower
@@ -173,20 +300,23 @@ impl Prepared<'_> {
         let starts = &rec.segment_starts;
         let with_latency = causes.contains(&Cause::Latency);
         // Features do not depend on the latency hyper-parameters: compute them once.
-        let feats: Vec<Features> = (0..self.channels.len())
+        let (feats, shared): (Vec<Features>, Vec<Vec<bool>>) = (0..self.channels.len())
             .map(|c| {
                 let mut cols = Vec::new();
                 let mut names = Vec::new();
                 let mut nn = Vec::new();
+                let mut one = Vec::new();
                 for &cause in causes {
                     let (a, b, d) = self.features(cause, c);
+                    one.extend(b.iter().map(|name| self.shared_column(cause, c, name)));
                     cols.extend(a);
                     names.extend(b);
                     nn.extend(d);
                 }
-                (cols, names, nn)
+                ((cols, names, nn), one)
             })
-            .collect();
+            .unzip();
+        let shared = &shared;
         // Latency acts on the whole model output: a fractional dead time (linear
         // interpolation between samples) followed by a first-order lag.
         let lag = |x: &[f64], d: f64, tau: f64, factors: &[f64]| -> Vec<f64> {
@@ -223,15 +353,18 @@ impl Prepared<'_> {
             } else {
                 Vec::new()
             };
+            let shift = d > 0.0 || tau > 0.0;
+            let tr = |x: &Vec<f64>| {
+                if shift {
+                    lag(x, d, tau, &factors)
+                } else {
+                    x.clone()
+                }
+            };
+            if shared.iter().flatten().any(|s| *s) {
+                return fit_stacked(channels, feats, shared, train, &tr);
+            }
             for (c, ch) in channels.iter().enumerate() {
-                let shift = d > 0.0 || tau > 0.0;
-                let tr = |x: &Vec<f64>| {
-                    if shift {
-                        lag(x, d, tau, &factors)
-                    } else {
-                        x.clone()
-                    }
-                };
                 let fixed = tr(&ch.design.fixed);
                 let base: Vec<Vec<f64>> = ch.design.regressors.iter().map(tr).collect();
                 let ext: Vec<Vec<f64>> = if shift {
@@ -446,8 +579,13 @@ impl Prepared<'_> {
             }
             for (j, name) in feats[c].1.iter().enumerate() {
                 let v = fit.coef[nb + j];
+                let once = shared[c][j];
+                if once && c > 0 {
+                    // one parameter for every output, listed with the first
+                    continue;
+                }
                 if v != 0.0 {
-                    let label = if self.channels.len() > 1 {
+                    let label = if self.channels.len() > 1 && !once {
                         format!("{} [{}]", name, rec.outputs[c].name)
                     } else {
                         name.clone()

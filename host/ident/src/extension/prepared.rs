@@ -55,6 +55,10 @@ pub struct Prepared<'a> {
     pub ranges: Vec<f64>,
     /// Input means on the training rows.
     pub means: Vec<f64>,
+    /// True on a simulator record that logs its sensitivities to its states for every
+    /// output (`dsim_` columns): then offsets and gains of its inputs and states are one
+    /// parameter for all outputs (see `joint_fit`).
+    pub sensitivities_logged: bool,
     /// Latency (dead time in samples, lag in samples) found by the single-cause fit.
     pub latency_hint: std::cell::Cell<Option<(f64, f64)>>,
     /// Column strains and tip sensitivities of the pose baseline (`None` for other kinds).
@@ -146,6 +150,13 @@ impl<'a> Prepared<'a> {
             } else {
                 Vec::new()
             };
+            // only through sensitivities the simulator logs: estimated ones are extrapolated
+            // across the curve the states lie on, and the chain inherits that error
+            let through_states = if rec.logged_sensitivities(c).is_some() {
+                input_sensitivities_through_states(rec, &state_jac, &train)
+            } else {
+                None
+            };
             // Central differences of the fitted baseline in each input.
             let mut jac = Vec::new();
             let mut sign = Vec::new();
@@ -165,7 +176,9 @@ impl<'a> Prepared<'a> {
                     }
                     p
                 };
-                let j: Vec<f64> = if let Some(map) = &input_map {
+                let j: Vec<f64> = if let Some(through) = &through_states {
+                    through[k].clone()
+                } else if let Some(map) = &input_map {
                     // the simulator's output is given, not a function ident can evaluate:
                     // its sensitivity to each input is read off the simulated rows
                     map.derivative(k)
@@ -197,8 +210,11 @@ impl<'a> Prepared<'a> {
             });
         }
         let pose = baseline.pose_states(&cols);
+        let sensitivities_logged = matches!(baseline, Baseline::Simulator)
+            && (0..rec.outputs.len()).all(|c| rec.logged_sensitivities(c).is_some());
         Prepared {
             rec,
+            sensitivities_logged,
             pose,
             baseline,
             train,
@@ -356,13 +372,18 @@ pub fn channel_scale(ch: &ChannelFit, train: &[bool]) -> f64 {
 /// its state) falls far short, and its states then only feed friction.
 pub const STATES_DETERMINE_R2: f64 = 0.9999;
 
-/// Per state `x_j` of a simulator record, `d sim_c / d x_j` row by row, when the states
+/// Per state `x_j` of a simulator record, `d sim_c / d x_j` row by row: as the simulator logs
+/// them (`dsim_` columns), or else, when the states
 /// determine the simulated output of channel `c` (a cubic in them explains at least
 /// [`STATES_DETERMINE_R2`] of its training variance; at most four states, the most a cubic
 /// map is fitted in); empty otherwise. An effect inside the
 /// simulator then acts on its states: memory in a state, a state off by a constant or a
 /// factor, each reaching the output through this sensitivity.
 fn state_sensitivities(rec: &Record, c: usize, train: &[bool]) -> Vec<Vec<f64>> {
+    if let Some(logged) = rec.logged_sensitivities(c) {
+        // the simulator knows them exactly, also across the curve the record's states lie on
+        return logged.into_iter().map(<[f64]>::to_vec).collect();
+    }
     if rec.states.is_empty() || rec.states.len() > 4 {
         return Vec::new();
     }
@@ -381,6 +402,58 @@ fn state_sensitivities(rec: &Record, c: usize, train: &[bool]) -> Vec<Vec<f64>> 
         }
         _ => Vec::new(),
     }
+}
+
+/// Share of a state's training variance that a cubic in one input alone must explain for the
+/// state to count as following that input. A column's elongation follows its own chamber's
+/// command through the regulator's lag at 99.7 % (the lag is what the cubic misses); a state
+/// driven by several inputs falls well short against each of them.
+pub const STATE_FOLLOWS_INPUT_R2: f64 = 0.99;
+
+/// On a simulator record whose states determine its output (`state_jac` non-empty) and where
+/// each state follows one input alone (see [`STATE_FOLLOWS_INPUT_R2`]): `d sim / d u_k` per
+/// input, row by row, as the chain `sum_j d sim / d x_j * d x_j / d u_k` over the states that
+/// follow `u_k`; `None` otherwise.
+///
+/// Why: a simulator's inputs often lie on one curve in their space (a circle's three pressure
+/// commands), where a polynomial of the output in all inputs at once has its derivatives across
+/// the curve extrapolated. Each state as a function of its own input is a curve in one
+/// variable, which the record covers; an input offset then moves each state by its local
+/// slope, the shape a regulator's constant offset gives.
+fn input_sensitivities_through_states(
+    rec: &Record,
+    state_jac: &[Vec<f64>],
+    train: &[bool],
+) -> Option<Vec<Vec<f64>>> {
+    let n = rec.len();
+    let mut through = vec![vec![0.0; n]; rec.inputs.len()];
+    for (st, jx) in rec.states.iter().zip(state_jac) {
+        let x = st.values.as_slice();
+        let mut best: Option<(f64, usize, SimulatorMap)> = None;
+        for (k, inp) in rec.inputs.iter().enumerate() {
+            let u = inp.values.as_slice();
+            let tr: Vec<f64> = (0..n).filter(|&i| train[i]).map(|i| u[i]).collect();
+            let (mean, _) = signal::mean_std(&tr);
+            let Some(map) = SimulatorMap::fit(&[u], x, &[mean], &[span(&tr)]) else {
+                continue;
+            };
+            let r2 = map.r2(x, train);
+            if best.as_ref().is_none_or(|(b, _, _)| r2 > *b) {
+                best = Some((r2, k, map));
+            }
+        }
+        let (r2, k, map) = best?;
+        if r2 < STATE_FOLLOWS_INPUT_R2 {
+            return None;
+        }
+        for ((t, dx), j) in through[k].iter_mut().zip(map.derivative(0)).zip(jx) {
+            *t += j * dx;
+        }
+    }
+    through
+        .iter()
+        .any(|t| t.iter().any(|v| *v != 0.0))
+        .then_some(through)
 }
 
 /// A simulator's output as a complete polynomial in normalised columns (its inputs or its
