@@ -150,13 +150,15 @@ impl<'a> Prepared<'a> {
             } else {
                 Vec::new()
             };
-            // only through sensitivities the simulator logs: estimated ones are extrapolated
-            // across the curve the states lie on, and the chain inherits that error
-            let through_states = if rec.logged_sensitivities(c).is_some() {
-                input_sensitivities_through_states(rec, &state_jac, &train)
-            } else {
-                None
-            };
+            // only through sensitivities the simulator logs (estimated ones are extrapolated
+            // across the curve the states lie on, and the chain inherits that error), and only
+            // where the states determine the output (else an input also acts directly)
+            let through_states =
+                if rec.logged_sensitivities(c).is_some() && states_map(rec, c, &train).is_some() {
+                    input_sensitivities_through_states(rec, &state_jac, &train)
+                } else {
+                    None
+                };
             // Central differences of the fitted baseline in each input.
             let mut jac = Vec::new();
             let mut sign = Vec::new();
@@ -384,8 +386,18 @@ fn state_sensitivities(rec: &Record, c: usize, train: &[bool]) -> Vec<Vec<f64>> 
         // the simulator knows them exactly, also across the curve the record's states lie on
         return logged.into_iter().map(<[f64]>::to_vec).collect();
     }
+    match states_map(rec, c, train) {
+        Some(map) => (0..rec.states.len()).map(|j| map.derivative(j)).collect(),
+        None => Vec::new(),
+    }
+}
+
+/// The simulated output of channel `c` as a cubic in the states, when the states determine it
+/// (the cubic explains at least [`STATES_DETERMINE_R2`] of its training variance; at most four
+/// states); `None` otherwise.
+fn states_map(rec: &Record, c: usize, train: &[bool]) -> Option<SimulatorMap> {
     if rec.states.is_empty() || rec.states.len() > 4 {
-        return Vec::new();
+        return None;
     }
     let cols: Vec<&[f64]> = rec.states.iter().map(|s| s.values.as_slice()).collect();
     let mut means = Vec::new();
@@ -396,12 +408,8 @@ fn state_sensitivities(rec: &Record, c: usize, train: &[bool]) -> Vec<Vec<f64>> 
         ranges.push(span(&tr));
     }
     let sim = &rec.simulated[c].values;
-    match SimulatorMap::fit(&cols, sim, &means, &ranges) {
-        Some(map) if map.r2(sim, train) >= STATES_DETERMINE_R2 => {
-            (0..cols.len()).map(|j| map.derivative(j)).collect()
-        }
-        _ => Vec::new(),
-    }
+    SimulatorMap::fit(&cols, sim, &means, &ranges)
+        .filter(|map| map.r2(sim, train) >= STATES_DETERMINE_R2)
 }
 
 /// Share of a state's training variance that a cubic in one input alone must explain for the
@@ -410,8 +418,8 @@ fn state_sensitivities(rec: &Record, c: usize, train: &[bool]) -> Vec<Vec<f64>> 
 /// driven by several inputs falls well short against each of them.
 pub const STATE_FOLLOWS_INPUT_R2: f64 = 0.99;
 
-/// On a simulator record whose states determine its output (`state_jac` non-empty) and where
-/// each state follows one input alone (see [`STATE_FOLLOWS_INPUT_R2`]): `d sim / d u_k` per
+/// On a simulator record that logs its sensitivities (`state_jac`), whose states determine its
+/// output, and where each state follows one input alone (see [`STATE_FOLLOWS_INPUT_R2`]): `d sim / d u_k` per
 /// input, row by row, as the chain `sum_j d sim / d x_j * d x_j / d u_k` over the states that
 /// follow `u_k`; `None` otherwise.
 ///
