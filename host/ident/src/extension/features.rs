@@ -253,7 +253,7 @@ impl Prepared<'_> {
                         .any(|r| r.iter().all(|v| *v == 1.0));
                 if !has_constant {
                     cols.push(vec![1.0; n]);
-                    names.push(format!("{} bias", rec.outputs[c].name));
+                    names.push(output_bias_name(&rec.outputs[c].name));
                     nonneg.push(false);
                 }
                 for (k, inp) in rec.inputs.iter().enumerate() {
@@ -270,7 +270,7 @@ impl Prepared<'_> {
             Cause::Gain => {
                 if matches!(self.baseline, Baseline::Simulator) {
                     cols.push(ch.design.fixed.clone());
-                    names.push(format!("{} simulated output gain - 1", rec.outputs[c].name));
+                    names.push(output_gain_name(&rec.outputs[c].name));
                     nonneg.push(false);
                 }
                 for (k, inp) in rec.inputs.iter().enumerate() {
@@ -400,6 +400,22 @@ impl Prepared<'_> {
         }
         (cols, names, nonneg)
     }
+}
+
+/// Name of the offset extension's bias of output `output`.
+fn output_bias_name(output: &str) -> String {
+    format!("{output} bias")
+}
+
+/// Name of the gain extension's scale of the simulated output `output`.
+fn output_gain_name(output: &str) -> String {
+    format!("{output} simulated output gain - 1")
+}
+
+/// Whether extension column `name` acts on output `output` alone (its bias or the scale of its
+/// simulated value) rather than through an input or a state.
+pub(super) fn is_output_column(output: &str, name: &str) -> bool {
+    name == output_bias_name(output) || name == output_gain_name(output)
 }
 
 /// Drops each column that the columns before it span on the training rows to 1e-6 of its

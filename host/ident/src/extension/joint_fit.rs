@@ -191,7 +191,7 @@ impl Prepared<'_> {
         self.sensitivities_logged
             && self.channels.len() > 1
             && matches!(cause, Cause::Offset | Cause::Gain)
-            && !name.starts_with(self.rec.outputs[c].name.as_str())
+            && !super::features::is_output_column(&self.rec.outputs[c].name, name)
     }
 
     /// Fits the baseline plus the extensions of `causes` jointly on the training rows.
