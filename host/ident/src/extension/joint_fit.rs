@@ -37,8 +37,8 @@ pub struct SetFit {
     pub actuator_lag_s: Option<f64>,
 }
 
-/// The stacked fit of every output channel at once, where some extension columns are
-/// [`Prepared::shared_columns`]: the channels' rows one below the other, each weighted by
+/// The stacked fit of every output channel at once, where some extension columns are shared
+/// (see `Prepared::shared_column`): the channels' rows one below the other, each weighted by
 /// its baseline residual's scale (as the sets' training criterion weighs them), each channel's
 /// own columns (its baseline's regressors and its own extension columns) in a block of its
 /// rows, a shared column's per-channel values stacked into one column. Returned per channel

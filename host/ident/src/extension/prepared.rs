@@ -112,6 +112,12 @@ impl<'a> Prepared<'a> {
             ranges.push(if r > 0.0 && r.is_finite() { r } else { 1.0 });
             means.push(signal::mean_std(&tr).0);
         }
+        // which input each state follows, and its slope in it: the same for every channel
+        let followed = if rec.sensitivities.is_empty() {
+            None
+        } else {
+            states_following_inputs(rec, &train)
+        };
         let mut channels = Vec::new();
         for (c, out) in rec.outputs.iter().enumerate() {
             let design =
@@ -153,12 +159,15 @@ impl<'a> Prepared<'a> {
             // only through sensitivities the simulator logs (estimated ones are extrapolated
             // across the curve the states lie on, and the chain inherits that error), and only
             // where the states determine the output (else an input also acts directly)
-            let through_states =
-                if rec.logged_sensitivities(c).is_some() && states_map(rec, c, &train).is_some() {
-                    input_sensitivities_through_states(rec, &state_jac, &train)
-                } else {
-                    None
-                };
+            let through_states = match &followed {
+                Some(f)
+                    if rec.logged_sensitivities(c).is_some()
+                        && states_map(rec, c, &train).is_some() =>
+                {
+                    input_sensitivities_through_states(rec.inputs.len(), f, &state_jac)
+                }
+                _ => None,
+            };
             // Central differences of the fitted baseline in each input.
             let mut jac = Vec::new();
             let mut sign = Vec::new();
@@ -418,10 +427,39 @@ fn states_map(rec: &Record, c: usize, train: &[bool]) -> Option<SimulatorMap> {
 /// driven by several inputs falls well short against each of them.
 pub const STATE_FOLLOWS_INPUT_R2: f64 = 0.99;
 
+/// Per state, the input it follows alone (a cubic in that input explains at least
+/// [`STATE_FOLLOWS_INPUT_R2`] of the state's training variance) and `d x_j / d u_k` row by row,
+/// read off that cubic; `None` when a state follows no single input.
+fn states_following_inputs(rec: &Record, train: &[bool]) -> Option<Vec<(usize, Vec<f64>)>> {
+    let n = rec.len();
+    rec.states
+        .iter()
+        .map(|st| {
+            let x = st.values.as_slice();
+            let mut best: Option<(f64, usize, SimulatorMap)> = None;
+            for (k, inp) in rec.inputs.iter().enumerate() {
+                let u = inp.values.as_slice();
+                let tr: Vec<f64> = (0..n).filter(|&i| train[i]).map(|i| u[i]).collect();
+                let (mean, _) = signal::mean_std(&tr);
+                let Some(map) = SimulatorMap::fit(&[u], x, &[mean], &[span(&tr)]) else {
+                    continue;
+                };
+                let r2 = map.r2(x, train);
+                if best.as_ref().is_none_or(|(b, _, _)| r2 > *b) {
+                    best = Some((r2, k, map));
+                }
+            }
+            let (r2, k, map) = best?;
+            (r2 >= STATE_FOLLOWS_INPUT_R2).then(|| (k, map.derivative(0)))
+        })
+        .collect()
+}
+
 /// On a simulator record that logs its sensitivities (`state_jac`), whose states determine its
-/// output, and where each state follows one input alone (see [`STATE_FOLLOWS_INPUT_R2`]): `d sim / d u_k` per
-/// input, row by row, as the chain `sum_j d sim / d x_j * d x_j / d u_k` over the states that
-/// follow `u_k`; `None` otherwise.
+/// output, and where each state follows one input alone (`followed`, from
+/// [`states_following_inputs`]): `d sim / d u_k` per input, row by row, as the chain
+/// `sum_j d sim / d x_j * d x_j / d u_k` over the states that follow `u_k`; `None` when the
+/// chain is zero.
 ///
 /// Why: a simulator's inputs often lie on one curve in their space (a circle's three pressure
 /// commands), where a polynomial of the output in all inputs at once has its derivatives across
@@ -429,33 +467,15 @@ pub const STATE_FOLLOWS_INPUT_R2: f64 = 0.99;
 /// variable, which the record covers; an input offset then moves each state by its local
 /// slope, the shape a regulator's constant offset gives.
 fn input_sensitivities_through_states(
-    rec: &Record,
+    inputs: usize,
+    followed: &[(usize, Vec<f64>)],
     state_jac: &[Vec<f64>],
-    train: &[bool],
 ) -> Option<Vec<Vec<f64>>> {
-    let n = rec.len();
-    let mut through = vec![vec![0.0; n]; rec.inputs.len()];
-    for (st, jx) in rec.states.iter().zip(state_jac) {
-        let x = st.values.as_slice();
-        let mut best: Option<(f64, usize, SimulatorMap)> = None;
-        for (k, inp) in rec.inputs.iter().enumerate() {
-            let u = inp.values.as_slice();
-            let tr: Vec<f64> = (0..n).filter(|&i| train[i]).map(|i| u[i]).collect();
-            let (mean, _) = signal::mean_std(&tr);
-            let Some(map) = SimulatorMap::fit(&[u], x, &[mean], &[span(&tr)]) else {
-                continue;
-            };
-            let r2 = map.r2(x, train);
-            if best.as_ref().is_none_or(|(b, _, _)| r2 > *b) {
-                best = Some((r2, k, map));
-            }
-        }
-        let (r2, k, map) = best?;
-        if r2 < STATE_FOLLOWS_INPUT_R2 {
-            return None;
-        }
-        for ((t, dx), j) in through[k].iter_mut().zip(map.derivative(0)).zip(jx) {
-            *t += j * dx;
+    let n = state_jac.first().map_or(0, Vec::len);
+    let mut through = vec![vec![0.0; n]; inputs];
+    for ((k, dx), jx) in followed.iter().zip(state_jac) {
+        for ((t, d), j) in through[*k].iter_mut().zip(dx).zip(jx) {
+            *t += j * d;
         }
     }
     through
