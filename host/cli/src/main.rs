@@ -68,8 +68,38 @@ enum Command {
     Peg(cmd_peg::PegCommand),
 }
 
-fn main() -> anyhow::Result<()> {
-    let cli = Cli::parse();
+fn main() -> std::process::ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("{}", error_report(&e));
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+/// The error and its causes, as anyhow prints them, without the backtrace that a set
+/// `RUST_BACKTRACE` would add: a refused input is not a bug. `OCM_ERROR_BACKTRACE=1` adds it.
+fn error_report(e: &anyhow::Error) -> String {
+    if std::env::var_os("OCM_ERROR_BACKTRACE").is_some_and(|v| v == "1") {
+        return format!("Error: {e:?}");
+    }
+    let mut out = format!("Error: {e}");
+    let causes: Vec<String> = e.chain().skip(1).map(|c| c.to_string()).collect();
+    if !causes.is_empty() {
+        out.push_str("\n\nCaused by:");
+        for (i, c) in causes.iter().enumerate() {
+            if causes.len() == 1 {
+                out.push_str(&format!("\n    {c}"));
+            } else {
+                out.push_str(&format!("\n    {i}: {c}"));
+            }
+        }
+    }
+    out
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Lut(cmd) => cmd_lut::run(cmd),
         Command::Model(cmd) => cmd_model::run(cmd),

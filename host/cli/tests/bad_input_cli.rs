@@ -4,15 +4,23 @@
 use std::process::Command;
 
 /// Runs `ocm ARGS`, which must fail cleanly (an error, not a crash), and returns its stderr.
+/// `RUST_BACKTRACE` is set, as on many developers' machines: a refused input still prints
+/// its message alone, without a backtrace.
 fn fails(args: &[&str]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
         .args(args)
-        .env("RUST_BACKTRACE", "0")
+        .env("RUST_BACKTRACE", "1")
+        .env_remove("OCM_ERROR_BACKTRACE")
         .output()
         .expect("the ocm binary runs");
     let err = String::from_utf8_lossy(&out.stderr).into_owned();
     assert_eq!(out.status.code(), Some(1), "ocm {args:?}: {err}");
     assert!(!err.contains("panicked"), "ocm {args:?}: {err}");
+    assert!(
+        !err.to_lowercase().contains("backtrace"),
+        "ocm {args:?}: {err}"
+    );
+    assert!(err.starts_with("Error: "), "ocm {args:?}: {err}");
     err
 }
 
@@ -227,4 +235,21 @@ fn compare_real_candidates_are_checked_before_any_work() {
         assert_eq!(e.contains("no-such-dir"), !refused, "{json}: {e}");
     }
     let _ = std::fs::remove_file(&map);
+}
+
+#[test]
+fn an_error_prints_its_causes_and_a_backtrace_only_when_asked() {
+    let missing = "no-such-dir/no-such.lut";
+    let e = fails(&["lut", "check", missing]);
+    assert!(e.contains(&format!("reading LUT image {missing}")), "{e}");
+    assert!(e.contains("Caused by:"), "{e}");
+    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
+        .args(["lut", "check", missing])
+        .env("RUST_BACKTRACE", "1")
+        .env("OCM_ERROR_BACKTRACE", "1")
+        .output()
+        .expect("the ocm binary runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("Stack backtrace"), "{err}");
 }

@@ -115,6 +115,10 @@ pub struct Indentation<'a> {
 
 const NONE: u32 = u32::MAX;
 
+/// A failing node this close to a self-touching edge of the indenter is reported as caught in
+/// it, m.
+const PINCH_NOTE_M: f64 = 0.1e-3;
+
 impl<'a> Indentation<'a> {
     /// Prepares an indentation of `gel` by `indenter` placed at `placement`, at zero depth.
     /// Errors when the indenter would not touch the gel's surface even at the final depth.
@@ -332,10 +336,11 @@ impl Indentation<'_> {
                     (self.x, self.contact) = saved;
                     stats.2 += 1;
                     if stats.2 > self.options.max_cuts {
+                        let why = self.explain(f.why, f.node, target);
                         return Err(TactileError::NoConvergence {
                             step,
                             depth_mm: target * 1e3,
-                            why: f.why,
+                            why,
                             residual_n: f.residual,
                             node: f.node,
                         });
@@ -379,6 +384,30 @@ impl Indentation<'_> {
             slipping_nodes: active.iter().filter(|a| a.slipping).count(),
             cuts: stats.2,
         })
+    }
+
+    /// A failure's reason, with where its worst node sits when that is at an edge where the
+    /// indenter's surface touches itself: a node wedged in that zero-width crevice is pushed
+    /// by one side at a time (one closest point per node), so Newton cannot settle it.
+    fn explain(&self, why: String, node: usize, depth_m: f64) -> String {
+        let placed = Placed {
+            indenter: self.indenter,
+            pose: self.pose_at(depth_m),
+        };
+        let x = Vector3::new(self.x[3 * node], self.x[3 * node + 1], self.x[3 * node + 2]);
+        match placed.nearest_pinch(&x) {
+            Some((d, c)) if d <= PINCH_NOTE_M => format!(
+                "{why}; node {node} lies {:.3} mm from ({:.3}, {:.3}, {:.3}) mm on an edge where \
+                 the indenter's surface touches itself (more than two triangles share it): a \
+                 node in that zero-width crevice is pushed by one side at a time, as contact \
+                 takes one closest point per node",
+                d * 1e3,
+                c.x * 1e3,
+                c.y * 1e3,
+                c.z * 1e3
+            ),
+            _ => why,
+        }
     }
 
     /// Equilibrium at `depth_m` with augmented-Lagrangian updates until the penetration is

@@ -20,6 +20,9 @@ pub struct Indenter {
     pub z_min: f64,
     /// Bounding box of the surface in its own frame, m.
     pub bounds: ([f64; 3], [f64; 3]),
+    /// Edges (end points, own frame, m) where the surface touches itself: more than two
+    /// triangles share them, so the outside there is a crevice of zero width.
+    pub pinch_edges: Vec<[Vector3<f64>; 2]>,
 }
 
 impl std::fmt::Debug for Indenter {
@@ -78,13 +81,25 @@ impl Indenter {
         // Closed: every directed edge is matched by as many reversed ones (an edge where two
         // lobes touch, used by four triangles, is allowed: unseen id4 has one).
         let mut count: std::collections::HashMap<(usize, usize), i64> = Default::default();
+        let mut uses: std::collections::HashMap<(usize, usize), usize> = Default::default();
         for t in &triangles {
             for e in 0..3 {
                 let (a, b) = (t[e], t[(e + 1) % 3]);
                 let key = (a.min(b), a.max(b));
                 *count.entry(key).or_default() += if a < b { 1 } else { -1 };
+                *uses.entry(key).or_default() += 1;
             }
         }
+        let mut pinch_edges: Vec<[Vector3<f64>; 2]> = uses
+            .iter()
+            .filter(|&(_, &n)| n > 2)
+            .map(|(&(a, b), _)| [Vector3::from(points[a]), Vector3::from(points[b])])
+            .collect();
+        pinch_edges.sort_by(|p, q| {
+            (p[0].x, p[0].y, p[0].z)
+                .partial_cmp(&(q[0].x, q[0].y, q[0].z))
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
         let open = count.values().filter(|&&c| c != 0).count();
         if open > 0 {
             return Err(err(format!(
@@ -118,6 +133,7 @@ impl Indenter {
             mesh,
             z_min: lo[2],
             bounds: (lo, hi),
+            pinch_edges,
         })
     }
 
@@ -149,6 +165,21 @@ impl Indenter {
             distance: sign * dist,
             normal,
         }
+    }
+
+    /// The point of the surface's self-touching edges nearest to a point of its own frame, and
+    /// the distance to it, m; `None` when the surface nowhere touches itself.
+    pub fn nearest_pinch_local(&self, p: &Vector3<f64>) -> Option<(f64, Vector3<f64>)> {
+        self.pinch_edges
+            .iter()
+            .map(|[a, b]| {
+                let ab = b - a;
+                let t =
+                    ((p - a).dot(&ab) / ab.norm_squared().max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
+                let c = a + ab * t;
+                ((p - c).norm(), c)
+            })
+            .min_by(|x, y| x.0.total_cmp(&y.0))
     }
 
     /// Lowest z of the surface after rotating it by `rotation` about its own origin, m.
@@ -270,6 +301,14 @@ impl Placed<'_> {
             distance: p.distance,
             normal: self.pose.rotation * p.normal,
         }
+    }
+
+    /// The nearest point (gel frame) of the surface's self-touching edges to gel-frame point
+    /// `x`, and the distance to it, m.
+    pub fn nearest_pinch(&self, x: &Vector3<f64>) -> Option<(f64, Vector3<f64>)> {
+        self.indenter
+            .nearest_pinch_local(&self.pose.to_local(x))
+            .map(|(d, c)| (d, self.pose.rotation * c + self.pose.translation))
     }
 
     /// Axis-aligned box of the placed surface in the gel frame, m (from its local box corners).

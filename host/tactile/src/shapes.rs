@@ -76,6 +76,17 @@ pub fn cylinder(a_m: f64, h_m: f64, seg: usize) -> Result<Indenter> {
     Indenter::from_triangles("cylinder", pts, tris)
 }
 
+/// The faces of a box whose corner k sits at (x_k, y_k, z_k) = bits 0, 1, 2 of k, each wound
+/// outward.
+const BOX_QUADS: [[usize; 4]; 6] = [
+    [0, 2, 3, 1],
+    [4, 5, 7, 6],
+    [0, 1, 5, 4],
+    [2, 6, 7, 3],
+    [0, 4, 6, 2],
+    [1, 3, 7, 5],
+];
+
 /// A box [-a, a] x [-b, b] x [0, h], m.
 pub fn block(a_m: f64, b_m: f64, h_m: f64) -> Result<Indenter> {
     let mut pts = Vec::new();
@@ -86,15 +97,7 @@ pub fn block(a_m: f64, b_m: f64, h_m: f64) -> Result<Indenter> {
             if k & 4 == 0 { 0.0 } else { h_m },
         ]);
     }
-    let quads = [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ];
-    let tris = quads
+    let tris = BOX_QUADS
         .iter()
         .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
         .collect();
@@ -318,6 +321,56 @@ mod tests {
         assert!((q.distance + 0.01e-3).abs() < 1e-12 && (q.normal.z + 1.0).abs() < 1e-9);
         let b = block(1e-3, 2e-3, 1e-3).unwrap();
         assert!((b.volume() - 8e-9).abs() < 1e-20);
+    }
+
+    /// Two cubes that share one edge: the edge is the surface's one self-touching edge, and the
+    /// nearest point on it is found for points beside it and beyond its end.
+    #[test]
+    fn cubes_sharing_an_edge_touch_there() {
+        let mm = 1e-3;
+        let mut pts: Vec<[f64; 3]> = Vec::new();
+        let mut index = |p: [f64; 3]| {
+            pts.iter().position(|q| *q == p).unwrap_or_else(|| {
+                pts.push(p);
+                pts.len() - 1
+            })
+        };
+        let mut tris = Vec::new();
+        for origin in [[0.0, 0.0], [1.0, 1.0]] {
+            let corner: Vec<usize> = (0..8)
+                .map(|k| {
+                    index([
+                        (origin[0] + f64::from(k & 1)) * mm,
+                        (origin[1] + f64::from((k >> 1) & 1)) * mm,
+                        f64::from((k >> 2) & 1) * mm,
+                    ])
+                })
+                .collect();
+            for q in BOX_QUADS {
+                let c = q.map(|i| corner[i]);
+                tris.push([c[0], c[1], c[2]]);
+                tris.push([c[0], c[2], c[3]]);
+            }
+        }
+        assert_eq!(pts.len(), 14, "the cubes share two corners");
+        let two = Indenter::from_triangles("two cubes", pts, tris).unwrap();
+        assert!((two.volume() - 2e-9).abs() < 1e-21);
+        assert_eq!(two.pinch_edges.len(), 1);
+        let (d, c) = two
+            .nearest_pinch_local(&Vector3::new(1.2 * mm, 0.9 * mm, 0.5 * mm))
+            .unwrap();
+        assert!((d - 0.05f64.sqrt() * mm).abs() < 1e-12, "{d}");
+        assert!((c - Vector3::new(mm, mm, 0.5 * mm)).norm() < 1e-12, "{c:?}");
+        let (d, c) = two
+            .nearest_pinch_local(&Vector3::new(mm, mm, 1.5 * mm))
+            .unwrap();
+        assert!(
+            (d - 0.5 * mm).abs() < 1e-12 && (c.z - mm).abs() < 1e-12,
+            "{d} {c:?}"
+        );
+        let one = block(1e-3, 2e-3, 1e-3).unwrap();
+        assert!(one.pinch_edges.is_empty());
+        assert!(one.nearest_pinch_local(&Vector3::zeros()).is_none());
     }
 
     /// An open surface is refused with an error that says so.

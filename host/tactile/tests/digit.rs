@@ -37,6 +37,37 @@ fn setups_resolve_to_closed_indenters() {
     }
 }
 
+/// One STL touches itself, along an edge shared by four triangles: the unseen `id4` (the two
+/// such edges of `stamp.stl` bound a sliver of two triangles that welding removes). The edge
+/// lies at id4's lowest point, so that is where it first presses the gel (the set-up presses it
+/// unrotated) and where its FEM stops at the first step.
+#[test]
+fn self_touching_edges_are_found_where_id4_first_presses() {
+    let Some(dir) = digit_dir() else { return };
+    let setups = digit_setups(&dir).unwrap();
+    let mut pinched = std::collections::BTreeMap::new();
+    let mut seen = std::collections::BTreeSet::new();
+    for s in &setups {
+        if seen.insert(s.stl.clone()) {
+            let ind = Indenter::from_stl(&s.stl).unwrap();
+            if !ind.pinch_edges.is_empty() {
+                pinched.insert(ind.name.to_lowercase(), ind.pinch_edges.len());
+            }
+        }
+    }
+    let expected: std::collections::BTreeMap<String, usize> = [("id4".to_string(), 1)].into();
+    assert_eq!(pinched, expected);
+    let id4 = setups.iter().find(|s| s.name == "id4").unwrap();
+    assert_eq!(id4.placement.euler_deg, [0.0; 3]);
+    let ind = Indenter::from_stl(&id4.stl).unwrap();
+    let lowest = ind.pinch_edges[0][0].z.min(ind.pinch_edges[0][1].z);
+    assert!(
+        lowest - ind.z_min < 0.05e-3,
+        "the pinch reaches {lowest} m, the tip {} m",
+        ind.z_min
+    );
+}
+
 /// The sphere set-up `sphere1` on the coarse gel for 20 steps (0.2 mm): every step converges
 /// with the penetration within tolerance, the force grows with depth, and the contact mask sits
 /// under the indenter.
