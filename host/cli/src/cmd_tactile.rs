@@ -373,6 +373,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 .iter()
                 .map(|o| o.max_penetration_m)
                 .fold(0.0, f64::max);
+            let held_from = outputs.iter().find(|o| o.held_planes).map(|o| o.step);
             let summary = serde_json::json!({
                 "setup": s.name,
                 "indenter": indenter.name,
@@ -388,6 +389,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 "newton_iterations": iters,
                 "max_penetration_um": max_pen * 1e6,
                 "penetration_tol_um": opts.contact.penetration_tol_m * 1e6,
+                "held_planes_from_step": held_from,
                 "seconds": elapsed,
                 "seconds_per_step": elapsed / steps as f64,
                 "out": out.display().to_string(),
@@ -396,7 +398,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 println!("{}", serde_json::to_string_pretty(&summary)?);
             } else {
                 println!(
-                    "{}: {} steps to {:.3} mm on {} ({} nodes): F_z {:.4} N, {}; {} Newton iterations, max penetration {:.3} um (tol {:.3}); {:.2} s/step; files in {}",
+                    "{}: {} steps to {:.3} mm on {} ({} nodes): F_z {:.4} N, {}; {} Newton iterations, max penetration {:.3} um (tol {}); {:.2} s/step; files in {}",
                     s.name,
                     steps,
                     last.depth_mm,
@@ -416,7 +418,14 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                     },
                     iters,
                     max_pen * 1e6,
-                    opts.contact.penetration_tol_m * 1e6,
+                    match held_from {
+                        Some(k) => format!(
+                            "{:.3}; held contact planes from step {k}, tol {:.3} there",
+                            opts.contact.penetration_tol_m * 1e6,
+                            opts.held_penetration_tol_m() * 1e6
+                        ),
+                        None => format!("{:.3}", opts.contact.penetration_tol_m * 1e6),
+                    },
                     elapsed / steps as f64,
                     out.display()
                 );

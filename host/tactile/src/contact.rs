@@ -10,6 +10,13 @@
 //! indenter since the last converged step, P the tangent projector) sticks when |f_tr| <= mu p and
 //! is scaled back onto the cone otherwise. The tangent drops the non-symmetric dp/dx term of a
 //! sliding node (Newton stays convergent, a little slower, with a symmetric solver).
+//!
+//! Held planes (frictionless, a retry): where a node's closest point jumps between faces (a
+//! crevice between two bumps, a valley of a faceted texture), the force above turns with it
+//! and Newton stalls. Under the held-plane law each node is instead pushed by the tangent
+//! planes of the faces it has met, each with its own penalty and multiplier, two or three at
+//! once in a crevice or a concave corner; the planes are renewed from the true closest points
+//! after every Newton solve until no node penetrates the true surface beyond the tolerance.
 
 use crate::indenter::Placed;
 use nalgebra::{Matrix3, Vector3};
@@ -101,6 +108,23 @@ pub struct NodeForce {
     pub energy_j: f64,
 }
 
+/// A node's contact plane held through Newton solves: the indenter's tangent plane at the
+/// node's closest point, in the indenter's own frame, with its multiplier.
+#[derive(Debug, Clone, Copy)]
+pub struct HeldPlane {
+    /// A point of the plane, indenter frame, m.
+    pub point: Vector3<f64>,
+    /// Its outward unit normal, indenter frame.
+    pub normal: Vector3<f64>,
+    /// Augmented-Lagrangian multiplier, N.
+    pub lambda_n: f64,
+}
+
+/// Most planes a node holds at once (a corner of three faces).
+const MAX_PLANES: usize = 3;
+/// Two closest-point planes are one when their normals are this close (cosine).
+const SAME_PLANE_COS: f64 = 0.985;
+
 /// Contact of a set of surface nodes against one indenter.
 #[derive(Debug, Clone)]
 pub struct Contact {
@@ -112,6 +136,10 @@ pub struct Contact {
     pub area_m2: Vec<f64>,
     /// Converged history per node.
     pub history: Vec<NodeHistory>,
+    /// Planes per node when the held-plane law is on (`None`: each node against its closest
+    /// point). A node held by the planes of two faces at once stays in a crevice or concave
+    /// corner of the indenter, where its closest point jumps from face to face.
+    pub held: Option<Vec<Vec<HeldPlane>>>,
 }
 
 impl Contact {
@@ -129,7 +157,123 @@ impl Contact {
             nodes,
             area_m2,
             history,
+            held: None,
         }
+    }
+
+    /// Frictionless forces of the held planes at positions `x`; each active node's `gap_m` is
+    /// its true signed distance to the indenter, its `normal` the direction of its net force.
+    fn evaluate_held(
+        &self,
+        planes: &[Vec<HeldPlane>],
+        placed: &Placed,
+        candidates: &[usize],
+        x: &[f64],
+    ) -> Vec<NodeForce> {
+        let (r, t) = (placed.pose.rotation, placed.pose.translation);
+        let mut out = Vec::new();
+        for &k in candidates {
+            if planes[k].is_empty() {
+                continue;
+            }
+            let i = self.nodes[k];
+            let xi = Vector3::new(x[3 * i], x[3 * i + 1], x[3 * i + 2]);
+            let kn = self.params.normal_penalty_pa_m * self.area_m2[k];
+            let mut force = Vector3::zeros();
+            let mut stiffness = Matrix3::zeros();
+            let mut energy = 0.0;
+            for pl in &planes[k] {
+                let n = r * pl.normal;
+                let g = n.dot(&(xi - (r * pl.point + t)));
+                let p = pl.lambda_n - kn * g;
+                if p > 0.0 {
+                    force += n * p;
+                    stiffness += n * n.transpose() * kn;
+                    energy += p * p / (2.0 * kn);
+                }
+            }
+            let magnitude = force.norm();
+            if !(magnitude > 0.0) {
+                continue;
+            }
+            out.push(NodeForce {
+                k,
+                force,
+                normal_n: magnitude,
+                gap_m: placed.query(&xi).distance,
+                normal: force / magnitude,
+                stiffness,
+                slipping: false,
+                energy_j: energy,
+            });
+        }
+        out
+    }
+
+    /// Held-plane law: each plane's multiplier takes its force at `x`, then every candidate
+    /// node within `band_m` of the indenter (or inside it) takes the tangent plane at its
+    /// closest point, replacing a held plane of about the same normal and adding to the others
+    /// (a node pushed from one face into another holds both); a node farther out with no
+    /// force lets its planes go. Returns the largest true penetration, m.
+    pub fn refresh_planes(
+        &mut self,
+        placed: &Placed,
+        candidates: &[usize],
+        x: &[f64],
+        band_m: f64,
+        update_multipliers: bool,
+    ) -> f64 {
+        let n_nodes = self.nodes.len();
+        let held = self.held.get_or_insert_with(|| vec![Vec::new(); n_nodes]);
+        let (r, t) = (placed.pose.rotation, placed.pose.translation);
+        let mut penetration: f64 = 0.0;
+        for &k in candidates {
+            let i = self.nodes[k];
+            let xi = Vector3::new(x[3 * i], x[3 * i + 1], x[3 * i + 2]);
+            let kn = self.params.normal_penalty_pa_m * self.area_m2[k];
+            let mut pushing = false;
+            for pl in held[k].iter_mut() {
+                if update_multipliers {
+                    let n = r * pl.normal;
+                    let g = n.dot(&(xi - (r * pl.point + t)));
+                    pl.lambda_n = (pl.lambda_n - kn * g).max(0.0);
+                }
+                pushing |= pl.lambda_n > 0.0;
+            }
+            let q = placed.query(&xi);
+            penetration = penetration.max(-q.distance);
+            if q.distance > band_m {
+                if !pushing {
+                    held[k].clear();
+                }
+                continue;
+            }
+            let normal = r.transpose() * q.normal;
+            let point = placed.pose.to_local(&(xi - q.normal * q.distance));
+            let planes = &mut held[k];
+            if let Some(same) = planes
+                .iter_mut()
+                .find(|pl| pl.normal.dot(&normal) > SAME_PLANE_COS)
+            {
+                // A node on an edge between two facets of a curved face alternates between
+                // their normals when it takes each in turn; their mean holds it on the edge.
+                same.point = point;
+                same.normal = (same.normal + normal).normalize();
+            } else {
+                if planes.len() == MAX_PLANES
+                    && let Some(weakest) = (0..planes.len())
+                        .min_by(|&a, &b| planes[a].lambda_n.total_cmp(&planes[b].lambda_n))
+                {
+                    planes.remove(weakest);
+                }
+                planes.push(HeldPlane {
+                    point,
+                    normal,
+                    lambda_n: 0.0,
+                });
+            }
+        }
+        penetration
     }
 
     /// Forces of the active nodes at positions `x` with the indenter at `placed`, which moved by
@@ -141,6 +285,9 @@ impl Contact {
         candidates: &[usize],
         x: &[f64],
     ) -> Vec<NodeForce> {
+        if let Some(planes) = &self.held {
+            return self.evaluate_held(planes, placed, candidates, x);
+        }
         let mut out = Vec::new();
         let pr = &self.params;
         for &k in candidates {

@@ -396,6 +396,7 @@ fn read_cache(dir: &Path, opts: &DatasetOptions, nodes: usize) -> Result<Vec<Ste
             active_nodes: 0,
             slipping_nodes: 0,
             cuts: 0,
+            held_planes: false,
         });
     }
     if let Ok(csv) = std::fs::read_to_string(dir.join("force_depth.csv")) {

@@ -37,9 +37,27 @@ pub struct IndentOptions {
     pub max_cuts: usize,
     /// Residuals below this are converged whatever the force scale (round-off), N.
     pub abs_tol_n: f64,
+    /// Whether a frictionless step that fails under the closest-point law, after its cuts, is
+    /// solved again under the held-plane law, which then stays on (see [`Contact::held`]).
+    #[serde(default = "held_plane_retry_default")]
+    pub held_plane_retry: bool,
+}
+
+fn held_plane_retry_default() -> bool {
+    true
 }
 
 impl IndentOptions {
+    /// Penetration accepted under the held-plane law, m. Planes only approximate a curved face
+    /// near their point, so a node that slides along it meets the face a little inside the
+    /// plane; the law accepts the same 5 % of one depth step that sets the closest-point law's
+    /// 0.5 um at 10 um steps, and never less than the contact's own tolerance.
+    pub fn held_penetration_tol_m(&self) -> f64 {
+        self.contact
+            .penetration_tol_m
+            .max(HELD_TOL_STEP_SHARE * self.step_m)
+    }
+
     /// The dissertation's protocol (100 steps of 10 um) for a gel of modulus `young_pa`.
     pub fn protocol(young_pa: f64) -> Self {
         IndentOptions {
@@ -50,6 +68,7 @@ impl IndentOptions {
             rtol: 1e-7,
             max_cuts: 5,
             abs_tol_n: 1e-12,
+            held_plane_retry: true,
         }
     }
 }
@@ -81,6 +100,8 @@ pub struct StepOutput {
     pub slipping_nodes: usize,
     /// Times the depth increment was halved.
     pub cuts: usize,
+    /// Whether the step was solved under the held-plane law (see [`Contact::held`]).
+    pub held_planes: bool,
 }
 
 /// Why one Newton solve failed.
@@ -118,6 +139,15 @@ const NONE: u32 = u32::MAX;
 /// A failing node this close to a self-touching edge of the indenter is reported as caught in
 /// it, m.
 const PINCH_NOTE_M: f64 = 0.1e-3;
+
+/// Under the held-plane law, nodes this close outside the indenter take its tangent plane, m.
+const HELD_BAND_M: f64 = 5e-6;
+/// Penetration accepted under the held-plane law, as a share of one depth step (at least the
+/// contact's own tolerance).
+const HELD_TOL_STEP_SHARE: f64 = 0.05;
+/// The held-plane law may take this many times the closest-point law's multiplier updates
+/// (each may also add planes).
+const HELD_UPDATES_FACTOR: usize = 3;
 
 impl<'a> Indentation<'a> {
     /// Prepares an indentation of `gel` by `indenter` placed at `placement`, at zero depth.
@@ -335,6 +365,24 @@ impl Indentation<'_> {
                 Err(f) => {
                     (self.x, self.contact) = saved;
                     stats.2 += 1;
+                    if stats.2 > self.options.max_cuts
+                        && self.options.held_plane_retry
+                        && self.contact.held.is_none()
+                        && self.options.contact.friction == 0.0
+                    {
+                        // Retried with the held-plane law from the last converged depth; it
+                        // stays on for the rest of the run.
+                        if trace() {
+                            eprintln!(
+                                "closest-point law failed ({}); held planes from here",
+                                f.why
+                            );
+                        }
+                        self.contact.held = Some(vec![Vec::new(); self.contact.nodes.len()]);
+                        stats.2 = 0;
+                        targets = vec![depth_m];
+                        continue;
+                    }
                     if stats.2 > self.options.max_cuts {
                         let why = self.explain(f.why, f.node, target);
                         return Err(TactileError::NoConvergence {
@@ -383,6 +431,7 @@ impl Indentation<'_> {
             active_nodes: active.len(),
             slipping_nodes: active.iter().filter(|a| a.slipping).count(),
             cuts: stats.2,
+            held_planes: self.contact.held.is_some(),
         })
     }
 
@@ -422,14 +471,37 @@ impl Indentation<'_> {
         let indenter = self.indenter;
         let placed = Placed { indenter, pose };
         let cands = self.candidates(&placed);
-        let tol = self.options.contact.penetration_tol_m;
-        for update in 0..=self.options.contact.max_updates {
+        // Under held planes (`Contact::held`) the planes come from the closest points at the
+        // start and are renewed, with their multipliers, after every Newton solve.
+        let held = self.contact.held.is_some();
+        let (tol, updates, what) = if held {
+            self.contact
+                .refresh_planes(&placed, &cands, &self.x, HELD_BAND_M, false);
+            (
+                self.options.held_penetration_tol_m(),
+                HELD_UPDATES_FACTOR * self.options.contact.max_updates,
+                "updates of the held planes",
+            )
+        } else {
+            (
+                self.options.contact.penetration_tol_m,
+                self.options.contact.max_updates,
+                "multiplier updates",
+            )
+        };
+        for update in 0..=updates {
             let (active, res) = self.newton(&placed, &motion, &cands, stats)?;
-            let pen = active.iter().map(|a| -a.gap_m).fold(0.0, f64::max);
+            let pen = if held {
+                self.contact
+                    .refresh_planes(&placed, &cands, &self.x, HELD_BAND_M, true)
+            } else {
+                active.iter().map(|a| -a.gap_m).fold(0.0, f64::max)
+            };
             if trace() {
                 eprintln!(
-                    "depth {:.4} mm update {update}: penetration {:.3} um, active {}",
+                    "depth {:.4} mm update {update}{}: penetration {:.3} um, active {}",
                     depth_m * 1e3,
+                    if held { " (held planes)" } else { "" },
                     pen * 1e6,
                     active.len()
                 );
@@ -438,23 +510,24 @@ impl Indentation<'_> {
                 self.contact.commit_step(&active, &self.x);
                 return Ok((active, res));
             }
-            if update == self.options.contact.max_updates {
+            if update == updates {
                 let worst = active
                     .iter()
                     .max_by(|a, b| b.gap_m.total_cmp(&a.gap_m))
                     .map_or(0, |a| self.contact.nodes[a.k]);
                 return Err(Failure {
                     why: format!(
-                        "penetration {:.3} um stays above the tolerance {:.3} um after {} multiplier updates",
+                        "penetration {:.3} um stays above the tolerance {:.3} um after {update} {what}",
                         pen * 1e6,
                         tol * 1e6,
-                        update
                     ),
                     residual: res,
                     node: worst,
                 });
             }
-            self.contact.update_multipliers(&active);
+            if !held {
+                self.contact.update_multipliers(&active);
+            }
             stats.1 += 1;
         }
         unreachable!("the loop returns on its last update")

@@ -33,6 +33,8 @@ pub struct StepRow {
     pub residual_n: f64,
     /// Contact mask statistics.
     pub mask: MaskStats,
+    /// Whether the step was solved under the held-plane contact law.
+    pub held_planes: bool,
 }
 
 impl StepRow {
@@ -49,6 +51,7 @@ impl StepRow {
             max_penetration_um: s.max_penetration_m * 1e6,
             residual_n: s.residual_n,
             mask,
+            held_planes: s.held_planes,
         }
     }
 }
@@ -94,11 +97,11 @@ pub fn write_step(
 /// Writes the force-depth table with units in the header.
 pub fn write_force_depth_csv(path: &Path, rows: &[StepRow]) -> Result<()> {
     let mut out = String::from(
-        "step,depth_mm,force_x_n,force_y_n,force_z_n,active_nodes,slipping_nodes,newton_iterations,multiplier_updates,max_penetration_um,residual_n,mask_area_mm2,centroid_x_mm,centroid_y_mm,axis_angle_rad\n",
+        "step,depth_mm,force_x_n,force_y_n,force_z_n,active_nodes,slipping_nodes,newton_iterations,multiplier_updates,max_penetration_um,residual_n,mask_area_mm2,centroid_x_mm,centroid_y_mm,axis_angle_rad,contact_law\n",
     );
     for r in rows {
         out.push_str(&format!(
-            "{},{:.4},{:.6e},{:.6e},{:.6e},{},{},{},{},{:.4},{:.3e},{:.5},{:.5},{:.5},{:.5}\n",
+            "{},{:.4},{:.6e},{:.6e},{:.6e},{},{},{},{},{:.4},{:.3e},{:.5},{:.5},{:.5},{:.5},{}\n",
             r.step,
             r.depth_mm,
             r.force_n[0],
@@ -113,7 +116,12 @@ pub fn write_force_depth_csv(path: &Path, rows: &[StepRow]) -> Result<()> {
             r.mask.area_m2 * 1e6,
             r.mask.centroid_m[0] * 1e3,
             r.mask.centroid_m[1] * 1e3,
-            r.mask.angle_rad
+            r.mask.angle_rad,
+            if r.held_planes {
+                "held_planes"
+            } else {
+                "closest_point"
+            }
         ));
     }
     std::fs::write(path, out).map_err(|e| TactileError::io(path, e))

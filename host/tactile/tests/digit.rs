@@ -7,7 +7,7 @@ use ocm_tactile::gel::{Gel, GelMaterial};
 use ocm_tactile::indent::{IndentOptions, Indentation, Placement};
 use ocm_tactile::indenter::Indenter;
 use ocm_tactile::mask::{Grid, Mask};
-use ocm_tactile::setup::{digit_setups, read_setups};
+use ocm_tactile::setup::{Setup, digit_setups, read_setups};
 use std::path::PathBuf;
 
 fn digit_dir() -> Option<PathBuf> {
@@ -68,18 +68,27 @@ fn self_touching_edges_are_found_where_id4_first_presses() {
     );
 }
 
+/// The coarse gel and the set-up `name` with its indenter, when the data are here.
+fn on_coarse_gel(name: &str) -> Option<(Gel, Setup, Indenter)> {
+    let (dir, mesh) = (digit_dir()?, test_data("digit/DIGIT_remesh2.vtk")?);
+    let gel = Gel::digit(&mesh, GelMaterial::default()).unwrap();
+    let s = digit_setups(&dir)
+        .unwrap()
+        .into_iter()
+        .find(|s| s.name == name)
+        .unwrap();
+    let ind = Indenter::from_stl(&s.stl).unwrap();
+    Some((gel, s, ind))
+}
+
 /// The sphere set-up `sphere1` on the coarse gel for 20 steps (0.2 mm): every step converges
 /// with the penetration within tolerance, the force grows with depth, and the contact mask sits
 /// under the indenter.
 #[test]
 fn sphere_on_coarse_gel() {
-    let (Some(dir), Some(mesh)) = (digit_dir(), test_data("digit/DIGIT_remesh2.vtk")) else {
+    let Some((gel, s, ind)) = on_coarse_gel("sphere1") else {
         return;
     };
-    let gel = Gel::digit(&mesh, GelMaterial::default()).unwrap();
-    let setups = digit_setups(&dir).unwrap();
-    let s = setups.iter().find(|s| s.name == "sphere1").unwrap();
-    let ind = Indenter::from_stl(&s.stl).unwrap();
     let mut o = IndentOptions::protocol(gel.material.young_pa);
     o.steps = 20;
     let mut run = Indentation::new(&s.name, &gel, &ind, s.placement, o).unwrap();
@@ -104,6 +113,52 @@ fn sphere_on_coarse_gel() {
         "mask centroid {:?} is {d} m from the set-up",
         st.centroid_m
     );
+}
+
+/// The unseen `id4` on the coarse gel, 20 steps of 50 um (the data sets' protocol): the
+/// closest-point law alone stops at step 10, where nodes caught between its bumps are pushed
+/// by one face at a time; with the held-plane retry (the default) every step converges, the
+/// steps from the retry on under held planes, each within the held law's tolerance (5 % of a
+/// step), and the force grows with depth.
+#[test]
+fn id4_converges_on_held_planes_where_closest_points_stall() {
+    let Some((gel, s, ind)) = on_coarse_gel("id4") else {
+        return;
+    };
+    let mut o = IndentOptions::protocol(gel.material.young_pa);
+    o.steps = 20;
+    o.step_m = 50e-6;
+    o.held_plane_retry = false;
+    let mut run = Indentation::new(&s.name, &gel, &ind, s.placement, o).unwrap();
+    match run.run(|_| {}) {
+        Err(TactileError::NoConvergence { step, .. }) => assert_eq!(step, 10),
+        other => panic!("the closest-point law alone: {:?}", other.map(|v| v.len())),
+    }
+    o.held_plane_retry = true;
+    let mut run = Indentation::new(&s.name, &gel, &ind, s.placement, o).unwrap();
+    let out = run.run(|_| {}).unwrap();
+    assert_eq!(out.len(), 20);
+    let first_held = out.iter().position(|st| st.held_planes).unwrap();
+    assert_eq!(out[first_held].step, 10);
+    assert!(out[first_held..].iter().all(|st| st.held_planes));
+    let mut last_f = 0.0;
+    for st in &out {
+        let tol = if st.held_planes {
+            o.held_penetration_tol_m()
+        } else {
+            o.contact.penetration_tol_m
+        };
+        assert!(
+            st.max_penetration_m <= tol,
+            "step {}: {} m",
+            st.step,
+            st.max_penetration_m
+        );
+        assert!(st.indenter_force_n[2] >= last_f, "step {}", st.step);
+        last_f = st.indenter_force_n[2];
+    }
+    assert!((out[19].depth_m - 1e-3).abs() < 1e-12);
+    assert!((o.held_penetration_tol_m() - 2.5e-6).abs() < 1e-15);
 }
 
 /// A set-up naming a missing indenter, an open STL, and an indenter placed off the gel each give
