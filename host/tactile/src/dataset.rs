@@ -472,9 +472,23 @@ pub fn random_setups(
     Ok(out)
 }
 
+/// Whether the FEM cache in `dir` has a force-depth table that records each step's contact
+/// law, as every run since the held-plane retry writes it.
+fn records_contact_law(dir: &Path) -> bool {
+    std::fs::read_to_string(dir.join("force_depth.csv"))
+        .ok()
+        .and_then(|csv| {
+            csv.lines()
+                .next()
+                .map(|h| h.split(',').any(|c| c == "contact_law"))
+        })
+        .unwrap_or(false)
+}
+
 /// The samples of one set-up: the FEM steps from `cache` (reused when there, else run and
 /// written there; a step that does not converge ends the set-up, and the reason is returned
-/// beside the steps before it) and the contact points at each depth.
+/// beside the steps before it; a partial cache whose table does not record the contact law
+/// predates the held-plane retry and is run again) and the contact points at each depth.
 pub fn setup_samples(
     gel: &Gel,
     top: &TopSurface,
@@ -489,6 +503,11 @@ pub fn setup_samples(
     iopts.step_m = opts.step_m;
     let mut run = Indentation::new(&setup.name, gel, &indenter, setup.placement, iopts)?;
     let mut steps = read_cache(cache, opts, gel.num_nodes())?;
+    if steps.len() < opts.steps && !records_contact_law(cache) {
+        // A run that stopped before the held-plane retry existed (or was cut off before its
+        // force-depth table) may go further now: it is run again from rest.
+        steps.clear();
+    }
     let mut stopped = None;
     std::fs::create_dir_all(cache).map_err(|e| TactileError::io(cache, e))?;
     setup.write_json(&cache.join("setup.json"))?;
@@ -1053,6 +1072,49 @@ mod tests {
         std::fs::remove_dir_all(&d).ok();
         std::fs::create_dir_all(&d).unwrap();
         d
+    }
+
+    /// A FEM cache that stopped short is reused as stopped when its table records the contact
+    /// law, and run again in full when it predates that column (written before the held-plane
+    /// retry, which may take it further).
+    #[test]
+    fn partial_caches_before_the_held_plane_retry_are_run_again() {
+        let gel = block();
+        let dir = scratch("partial");
+        let stl = sphere_stl(&dir, "ball", 1.5e-3, 0.0, 0.0);
+        let setup = setup_of("a", stl, [3e-3, 2e-3], [0.0; 3]);
+        let opts = DatasetOptions {
+            steps: 3,
+            step_m: 50e-6,
+            grid_spacing_m: 0.25e-3,
+        };
+        let top = TopSurface::from_gel(&gel);
+        let cgrid = ContactGrid::for_gel(&gel, opts.grid_spacing_m).unwrap();
+        let cache = dir.join("fem").join("a");
+        let samples = || setup_samples(&gel, &top, &cgrid, &setup, &opts, &cache).unwrap();
+        let (full, stopped) = samples();
+        assert_eq!((full.depth_m.len(), stopped), (3, None));
+        // cut the cache back to two steps, as a run that stopped there leaves it
+        let csv_path = cache.join("force_depth.csv");
+        let csv = std::fs::read_to_string(&csv_path).unwrap();
+        let two: Vec<&str> = csv.lines().take(3).collect();
+        std::fs::remove_file(cache.join("u_003.npy")).unwrap();
+        std::fs::remove_file(cache.join("f_003.npy")).unwrap();
+        std::fs::write(&csv_path, two.join("\n") + "\n").unwrap();
+        let (s, stopped) = samples();
+        assert_eq!(s.depth_m.len(), 2);
+        assert!(stopped.unwrap().contains("holds the first 2 of 3 steps"));
+        // the same cut without the contact-law column: run again, to the same fields
+        let old: Vec<String> = two
+            .iter()
+            .map(|l| l.rsplit_once(',').unwrap().0.to_string())
+            .collect();
+        std::fs::remove_file(cache.join("u_003.npy")).ok();
+        std::fs::write(&csv_path, old.join("\n") + "\n").unwrap();
+        let (again, stopped) = samples();
+        assert_eq!((again.depth_m.len(), stopped), (3, None));
+        assert_eq!(again.displacement_m, full.displacement_m);
+        assert!(records_contact_law(&cache));
     }
 
     /// Writes a sphere of radius `r` whose lowest point lies at `(ox, oy, 0)` as a binary STL
