@@ -140,6 +140,9 @@ const NONE: u32 = u32::MAX;
 /// it, m.
 const PINCH_NOTE_M: f64 = 0.1e-3;
 
+/// Step lengths a Newton line search tries (halving from the full step).
+const LINE_SEARCH_TRIALS: usize = 16;
+
 /// Under the held-plane law, nodes this close outside the indenter take its tangent plane, m.
 const HELD_BAND_M: f64 = 5e-6;
 /// Penetration accepted under the held-plane law, as a share of one depth step (at least the
@@ -642,7 +645,8 @@ impl Indentation<'_> {
             let mut alpha = 1.0;
             let mut accepted = None;
             let mut fallback = None;
-            for _ in 0..16 {
+            let mut inverted = 0;
+            for _ in 0..LINE_SEARCH_TRIALS {
                 let mut xt = self.x.clone();
                 for (j, &d) in self.pattern.dof_of.iter().enumerate() {
                     xt[d] += alpha * dx[j];
@@ -670,7 +674,7 @@ impl Indentation<'_> {
                         }
                         self.x = saved;
                     }
-                    Err(FemError::Inverted { .. }) => {}
+                    Err(FemError::Inverted { .. }) => inverted += 1,
                     Err(e) => return Err(fail(e.to_string(), &r, self)),
                 }
                 alpha *= 0.5;
@@ -682,11 +686,15 @@ impl Indentation<'_> {
                 accepted = Some(a);
             }
             let Some((evt, ft, rt, st)) = accepted else {
-                return Err(fail(
-                    format!("line search found no step that lowers the residual {rn:.3e} N"),
-                    &r,
-                    self,
-                ));
+                let why = if inverted > 0 {
+                    format!(
+                        "line search found no step that lowers the residual {rn:.3e} N \
+                         ({inverted} of its {LINE_SEARCH_TRIALS} trial steps would invert an element)"
+                    )
+                } else {
+                    format!("line search found no step that lowers the residual {rn:.3e} N")
+                };
+                return Err(fail(why, &r, self));
             };
             ev = evt;
             forces = ft;
