@@ -439,9 +439,12 @@ impl Indentation<'_> {
     }
 
     /// A failure's reason, with where its worst node sits when that is at an edge where the
-    /// indenter's surface touches itself: a node wedged in that zero-width crevice is pushed
-    /// by one side at a time (one closest point per node), so Newton cannot settle it.
+    /// indenter's surface touches itself: under the closest-point law a node wedged in that
+    /// zero-width crevice is pushed by one side at a time, so Newton cannot settle it.
     fn explain(&self, why: String, node: usize, depth_m: f64) -> String {
+        if self.contact.held.is_some() {
+            return why;
+        }
         let placed = Placed {
             indenter: self.indenter,
             pose: self.pose_at(depth_m),
