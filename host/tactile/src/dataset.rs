@@ -364,8 +364,10 @@ pub(crate) fn read_nodal(p: &Path, nodes: usize) -> Result<Vec<[f64; 3]>> {
 /// The FEM steps cached in `dir` (`u_NNN.npy`, `f_NNN.npy` over all mesh nodes, as `ocm tactile
 /// indent` writes them): the consecutive steps from 1 found there, at most `opts.steps`. The
 /// force on the indenter is minus the sum of the nodal contact forces (as the FEM reports it).
-/// A `force_depth.csv` beside them must list the same depths, else the cache is refused.
-fn read_cache(dir: &Path, opts: &DatasetOptions, nodes: usize) -> Result<Vec<StepOutput>> {
+/// A `force_depth.csv` beside them must list the same depths, else the cache is refused; each
+/// step's contact law is read from it, and whether it records the laws at all is returned
+/// beside the steps (every run since the held-plane retry writes them).
+fn read_cache(dir: &Path, opts: &DatasetOptions, nodes: usize) -> Result<(Vec<StepOutput>, bool)> {
     let mut out = Vec::new();
     for k in 1..=opts.steps {
         let (u, f) = (
@@ -399,8 +401,15 @@ fn read_cache(dir: &Path, opts: &DatasetOptions, nodes: usize) -> Result<Vec<Ste
             held_planes: false,
         });
     }
+    let mut records_law = false;
     if let Ok(csv) = std::fs::read_to_string(dir.join("force_depth.csv")) {
-        for (line, st) in csv.lines().skip(1).zip(&out) {
+        let law = csv
+            .lines()
+            .next()
+            .and_then(|h| h.split(',').position(|c| c == "contact_law"));
+        records_law = law.is_some();
+        for (line, st) in csv.lines().skip(1).zip(&mut out) {
+            st.held_planes = law.is_some_and(|j| line.split(',').nth(j) == Some("held_planes"));
             let depth_mm: f64 = line
                 .split(',')
                 .nth(1)
@@ -416,7 +425,7 @@ fn read_cache(dir: &Path, opts: &DatasetOptions, nodes: usize) -> Result<Vec<Ste
             }
         }
     }
-    Ok(out)
+    Ok((out, records_law))
 }
 
 /// `count` random placements of the `base` set-ups' indenters over `gel` (issue item 6: random
@@ -472,19 +481,6 @@ pub fn random_setups(
     Ok(out)
 }
 
-/// Whether the FEM cache in `dir` has a force-depth table that records each step's contact
-/// law, as every run since the held-plane retry writes it.
-fn records_contact_law(dir: &Path) -> bool {
-    std::fs::read_to_string(dir.join("force_depth.csv"))
-        .ok()
-        .and_then(|csv| {
-            csv.lines()
-                .next()
-                .map(|h| h.split(',').any(|c| c == "contact_law"))
-        })
-        .unwrap_or(false)
-}
-
 /// The samples of one set-up: the FEM steps from `cache` (reused when there, else run and
 /// written there; a step that does not converge ends the set-up, and the reason is returned
 /// beside the steps before it; a partial cache whose table does not record the contact law
@@ -502,8 +498,8 @@ pub fn setup_samples(
     iopts.steps = opts.steps;
     iopts.step_m = opts.step_m;
     let mut run = Indentation::new(&setup.name, gel, &indenter, setup.placement, iopts)?;
-    let mut steps = read_cache(cache, opts, gel.num_nodes())?;
-    if steps.len() < opts.steps && !records_contact_law(cache) {
+    let (mut steps, records_law) = read_cache(cache, opts, gel.num_nodes())?;
+    if steps.len() < opts.steps && !records_law {
         // A run that stopped before the held-plane retry existed (or was cut off before its
         // force-depth table) may go further now: it is run again from rest.
         steps.clear();
@@ -1114,7 +1110,7 @@ mod tests {
         let (again, stopped) = samples();
         assert_eq!((again.depth_m.len(), stopped), (3, None));
         assert_eq!(again.displacement_m, full.displacement_m);
-        assert!(records_contact_law(&cache));
+        assert!(read_cache(&cache, &opts, gel.num_nodes()).unwrap().1);
     }
 
     /// Writes a sphere of radius `r` whose lowest point lies at `(ox, oy, 0)` as a binary STL
