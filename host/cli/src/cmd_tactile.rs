@@ -374,6 +374,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 .map(|o| o.max_penetration_m)
                 .fold(0.0, f64::max);
             let held_from = outputs.iter().find(|o| o.held_planes).map(|o| o.step);
+            let shifted: usize = outputs.iter().map(|o| o.shifted_solves).sum();
             let summary = serde_json::json!({
                 "setup": s.name,
                 "indenter": indenter.name,
@@ -390,6 +391,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 "max_penetration_um": max_pen * 1e6,
                 "penetration_tol_um": opts.contact.penetration_tol_m * 1e6,
                 "held_planes_from_step": held_from,
+                "shifted_newton_iterations": shifted,
                 "seconds": elapsed,
                 "seconds_per_step": elapsed / steps as f64,
                 "out": out.display().to_string(),
@@ -398,7 +400,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 println!("{}", serde_json::to_string_pretty(&summary)?);
             } else {
                 println!(
-                    "{}: {} steps to {:.3} mm on {} ({} nodes): F_z {:.4} N, {}; {} Newton iterations, max penetration {:.3} um (tol {}); {:.2} s/step; files in {}",
+                    "{}: {} steps to {:.3} mm on {} ({} nodes): F_z {:.4} N, {}; {} Newton iterations ({} on an indefinite tangent, shifted), max penetration {:.3} um (tol {}); {:.2} s/step; files in {}",
                     s.name,
                     steps,
                     last.depth_mm,
@@ -417,6 +419,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                         "mask empty (no top-face point pressed beyond the 30 um threshold)".into()
                     },
                     iters,
+                    shifted,
                     max_pen * 1e6,
                     match held_from {
                         Some(k) => format!(

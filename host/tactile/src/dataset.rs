@@ -399,6 +399,7 @@ fn read_cache(dir: &Path, opts: &DatasetOptions, nodes: usize) -> Result<(Vec<St
             slipping_nodes: 0,
             cuts: 0,
             held_planes: false,
+            shifted_solves: 0,
         });
     }
     let mut records_law = false;

@@ -39,11 +39,16 @@ pub struct IndentOptions {
     pub abs_tol_n: f64,
     /// Whether a frictionless step that fails under the closest-point law, after its cuts, is
     /// solved again under the held-plane law, which then stays on (see [`Contact::held`]).
-    #[serde(default = "held_plane_retry_default")]
+    #[serde(default = "default_true")]
     pub held_plane_retry: bool,
+    /// Whether a frictionless Newton step on an indefinite tangent solves the tangent shifted
+    /// until it is positive definite (a descent step), instead of LU's step, which may climb
+    /// the potential (see [`ocm_fem::solve::linear::SparseSolver::solve_descent`]).
+    #[serde(default = "default_true")]
+    pub shift_indefinite: bool,
 }
 
-fn held_plane_retry_default() -> bool {
+fn default_true() -> bool {
     true
 }
 
@@ -69,6 +74,7 @@ impl IndentOptions {
             max_cuts: 5,
             abs_tol_n: 1e-12,
             held_plane_retry: true,
+            shift_indefinite: true,
         }
     }
 }
@@ -102,7 +108,13 @@ pub struct StepOutput {
     pub cuts: usize,
     /// Whether the step was solved under the held-plane law (see [`Contact::held`]).
     pub held_planes: bool,
+    /// Newton iterations whose tangent was indefinite and solved shifted (see
+    /// [`IndentOptions::shift_indefinite`]).
+    pub shifted_solves: usize,
 }
+
+/// Counts over one depth step: Newton iterations, multiplier updates, cuts, shifted solves.
+type Stats = (usize, usize, usize, usize);
 
 /// Why one Newton solve failed.
 struct Failure {
@@ -354,7 +366,7 @@ impl Indentation<'_> {
     pub fn advance_to(&mut self, depth_m: f64) -> Result<StepOutput> {
         self.steps_done += 1;
         let step = self.steps_done;
-        let mut stats = (0usize, 0usize, 0usize);
+        let mut stats = (0usize, 0usize, 0usize, 0usize);
         let mut targets = vec![depth_m];
         let mut last: Option<(Vec<NodeForce>, f64)> = None;
         while let Some(&target) = targets.last() {
@@ -435,6 +447,7 @@ impl Indentation<'_> {
             slipping_nodes: active.iter().filter(|a| a.slipping).count(),
             cuts: stats.2,
             held_planes: self.contact.held.is_some(),
+            shifted_solves: stats.3,
         })
     }
 
@@ -466,11 +479,11 @@ impl Indentation<'_> {
     }
 
     /// Equilibrium at `depth_m` with augmented-Lagrangian updates until the penetration is
-    /// within tolerance. `stats` accumulates (Newton iterations, updates, cuts).
+    /// within tolerance. `stats` accumulates the step's counts.
     fn solve_at(
         &mut self,
         depth_m: f64,
-        stats: &mut (usize, usize, usize),
+        stats: &mut Stats,
     ) -> std::result::Result<(Vec<NodeForce>, f64), Failure> {
         let pose = self.pose_at(depth_m);
         let motion = pose.translation - self.pose_at(self.depth_m).translation;
@@ -588,7 +601,7 @@ impl Indentation<'_> {
         placed: &Placed,
         motion: &Vector3<f64>,
         cands: &[usize],
-        stats: &mut (usize, usize, usize),
+        stats: &mut Stats,
     ) -> std::result::Result<(Vec<NodeForce>, f64), Failure> {
         let fail = |why: String, r: &[f64], s: &Self| {
             let (res, node) = s.worst(r);
@@ -605,7 +618,8 @@ impl Indentation<'_> {
         })?;
         let mut forces = self.contact.evaluate(placed, motion, cands, &self.x);
         let (mut r, mut scale) = self.residual(&ev, &forces);
-        for _ in 0..self.options.max_newton {
+        // One pass more than the limit: the last iteration's step is checked before failing.
+        for iteration in 0..=self.options.max_newton {
             let rn = norm(&r);
             if trace() {
                 eprintln!(
@@ -618,6 +632,9 @@ impl Indentation<'_> {
                     self.cached = Some((self.x.clone(), ev));
                 }
                 return Ok((forces, rn));
+            }
+            if iteration == self.options.max_newton {
+                break;
             }
             stats.0 += 1;
             let mut vals = match ev.tangent.take() {
@@ -636,8 +653,24 @@ impl Indentation<'_> {
                 }
             }
             let mut dx: Vec<f64> = r.iter().map(|v| -v).collect();
-            if let Err(e) = self.linear.solve(&vals, &mut dx) {
-                return Err(fail(e.to_string(), &r, self));
+            // Frictionless contact minimises a potential, so an indefinite tangent (the gel
+            // crushed under a punch's edge) is shifted until it is positive definite: its LU
+            // step can climb the potential, and the line search then finds nothing. With
+            // friction there is no potential, and LU's step is kept.
+            let solved = if self.options.contact.friction == 0.0 && self.options.shift_indefinite {
+                self.linear.solve_descent(&vals, &mut dx)
+            } else {
+                self.linear.solve(&vals, &mut dx).map(|()| 0.0)
+            };
+            let shift = match solved {
+                Ok(t) => t,
+                Err(e) => return Err(fail(e.to_string(), &r, self)),
+            };
+            if shift > 0.0 {
+                stats.3 += 1;
+                if trace() {
+                    eprintln!("    indefinite tangent: shifted by {shift:.0e} of its diagonal");
+                }
             }
             // Frictionless contact has a potential (strain energy plus the penalty potentials):
             // Armijo backtracking on it copes with the active set jumping; with friction the

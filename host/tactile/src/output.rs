@@ -35,6 +35,8 @@ pub struct StepRow {
     pub mask: MaskStats,
     /// Whether the step was solved under the held-plane contact law.
     pub held_planes: bool,
+    /// Newton iterations on an indefinite tangent, solved shifted.
+    pub shifted_solves: usize,
 }
 
 impl StepRow {
@@ -52,6 +54,7 @@ impl StepRow {
             residual_n: s.residual_n,
             mask,
             held_planes: s.held_planes,
+            shifted_solves: s.shifted_solves,
         }
     }
 }
@@ -97,11 +100,11 @@ pub fn write_step(
 /// Writes the force-depth table with units in the header.
 pub fn write_force_depth_csv(path: &Path, rows: &[StepRow]) -> Result<()> {
     let mut out = String::from(
-        "step,depth_mm,force_x_n,force_y_n,force_z_n,active_nodes,slipping_nodes,newton_iterations,multiplier_updates,max_penetration_um,residual_n,mask_area_mm2,centroid_x_mm,centroid_y_mm,axis_angle_rad,contact_law\n",
+        "step,depth_mm,force_x_n,force_y_n,force_z_n,active_nodes,slipping_nodes,newton_iterations,multiplier_updates,max_penetration_um,residual_n,mask_area_mm2,centroid_x_mm,centroid_y_mm,axis_angle_rad,contact_law,shifted_newton_iterations\n",
     );
     for r in rows {
         out.push_str(&format!(
-            "{},{:.4},{:.6e},{:.6e},{:.6e},{},{},{},{},{:.4},{:.3e},{:.5},{:.5},{:.5},{:.5},{}\n",
+            "{},{:.4},{:.6e},{:.6e},{:.6e},{},{},{},{},{:.4},{:.3e},{:.5},{:.5},{:.5},{:.5},{},{}\n",
             r.step,
             r.depth_mm,
             r.force_n[0],
@@ -121,7 +124,8 @@ pub fn write_force_depth_csv(path: &Path, rows: &[StepRow]) -> Result<()> {
                 "held_planes"
             } else {
                 "closest_point"
-            }
+            },
+            r.shifted_solves
         ));
     }
     std::fs::write(path, out).map_err(|e| TactileError::io(path, e))

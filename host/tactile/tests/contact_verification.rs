@@ -263,3 +263,33 @@ fn a_crowned_gel_is_pressed_from_its_apex_outwards() {
         "the flat block is pressed all over: {flat_reach:?}"
     );
 }
+
+/// A Newton solve that converges on its last allowed iteration converges: with the least
+/// iteration limit at which a one-solve step succeeds, that step took exactly the limit (the
+/// check after the last iteration used to be skipped, so a step converged on its last
+/// iteration was reported as "Newton iteration limit reached" with its residual below target).
+#[test]
+fn newton_may_converge_on_its_last_iteration() {
+    let gel = small_block();
+    let ball = shapes::sphere(1e-3, 16).unwrap();
+    let place = Placement {
+        xy_m: [2e-3, 2e-3],
+        euler_deg: [0.0; 3],
+    };
+    let mut least = None;
+    for limit in 1..=30 {
+        let mut o = options(1, 0.05e-3);
+        o.max_newton = limit;
+        o.max_cuts = 0;
+        o.held_plane_retry = false;
+        let mut ind = Indentation::new("last", &gel, &ball, place, o).unwrap();
+        if let Ok(s) = ind.advance_to(0.05e-3) {
+            least = Some((limit, s));
+            break;
+        }
+    }
+    let (limit, s) = least.expect("no iteration limit up to 30 converges");
+    assert!(limit > 1, "a one-iteration solve tests nothing");
+    assert_eq!(s.multiplier_updates, 0, "one Newton solve per step");
+    assert_eq!(s.newton_iterations, limit);
+}

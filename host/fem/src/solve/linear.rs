@@ -18,6 +18,19 @@ enum Factor {
     Lu(Box<Lu<usize, f64>>),
 }
 
+/// The square matrix with `values` on the CSC structure (`col_ptr`, `row_idx`) of order `n`.
+fn matrix<'a>(
+    n: usize,
+    col_ptr: &'a [usize],
+    row_idx: &'a [usize],
+    values: &'a [f64],
+) -> SparseColMatRef<'a, usize, f64> {
+    SparseColMatRef::new(
+        SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx),
+        values,
+    )
+}
+
 /// A square sparse matrix structure (full, both triangles) and cached factorizations.
 ///
 /// Factorizations run sequentially: for the few thousand unknowns of our meshes the supernodal
@@ -34,9 +47,18 @@ pub struct SparseSolver {
     factor: Factor,
     /// How many factorizations fell back to LU because the matrix was not positive definite.
     pub lu_fallbacks: usize,
+    /// The exponent of the last shift [`SparseSolver::solve_descent`] needed: the next
+    /// indefinite matrix of a Newton solve is likely to need one as large, so the ladder
+    /// starts two decades below it instead of at 1e-8.
+    last_shift_exp: i32,
 }
 
 const PAR: Par = Par::Seq;
+
+/// The least and largest Jacobi-scaled shifts [`SparseSolver::solve_descent`] tries, as powers of
+/// ten.
+const SHIFT_EXP_MIN: i32 = -8;
+const SHIFT_EXP_MAX: i32 = 2;
 
 impl SparseSolver {
     /// Takes a CSC structure with sorted rows in each column.
@@ -50,6 +72,7 @@ impl SparseSolver {
             lu: None,
             factor: Factor::None,
             lu_fallbacks: 0,
+            last_shift_exp: SHIFT_EXP_MIN,
         }
     }
 
@@ -80,26 +103,79 @@ impl SparseSolver {
     /// Factorizes A (values on the structure given to [`SparseSolver::new`]) and keeps the factor
     /// for [`SparseSolver::solve_factored`].
     pub fn factorize(&mut self, values: &[f64]) -> Result<()> {
+        if self.try_llt(values)? {
+            return Ok(());
+        }
+        self.lu_fallbacks += 1;
+        let a = matrix(self.n, &self.col_ptr, &self.row_idx, values);
+        if self.lu.is_none() {
+            self.lu = Some(
+                SymbolicLu::try_new(a.symbolic())
+                    .map_err(|e| FemError::Linear(format!("symbolic LU: {e:?}")))?,
+            );
+        }
+        let sym = self
+            .lu
+            .clone()
+            .ok_or_else(|| FemError::Linear("no symbolic LU".into()))?;
+        let f = Lu::try_new_with_symbolic(sym, a)
+            .map_err(|e| FemError::Linear(format!("singular matrix: {e:?}")))?;
+        self.factor = Factor::Lu(Box::new(f));
+        Ok(())
+    }
+
+    /// Solves (A + tau D) x = b in place, where D is the diagonal of A in absolute value and
+    /// tau the least of 0, 1e-8, 1e-7, ..., 1e2 at which Cholesky succeeds (the ladder starts
+    /// two decades below the last call's shift); returns tau.
+    ///
+    /// For minimising an energy whose tangent A may be indefinite (a Neo-Hookean gel crushed
+    /// under a punch's edge): the step is then a descent direction, which the LU solve of
+    /// [`SparseSolver::solve`] does not promise (Nocedal and Wright, Numerical Optimization,
+    /// 2nd ed., Alg. 3.3, with a Jacobi-scaled shift since the unknowns' stiffnesses differ).
+    pub fn solve_descent(&mut self, values: &[f64], rhs: &mut [f64]) -> Result<f64> {
+        if self.try_llt(values)? {
+            self.solve_factored(rhs)?;
+            return Ok(0.0);
+        }
+        let diag: Vec<usize> = (0..self.n)
+            .map(|j| {
+                let rows = &self.row_idx[self.col_ptr[j]..self.col_ptr[j + 1]];
+                rows.binary_search(&j)
+                    .map(|k| self.col_ptr[j] + k)
+                    .map_err(|_| FemError::Linear(format!("column {j} has no diagonal entry")))
+            })
+            .collect::<Result<_>>()?;
+        let floor = diag.iter().map(|&k| values[k].abs()).fold(0.0, f64::max) * 1e-12;
+        let mut shifted = values.to_vec();
+        for e in (self.last_shift_exp - 2).max(SHIFT_EXP_MIN)..=SHIFT_EXP_MAX {
+            let tau = 10f64.powi(e);
+            for &k in &diag {
+                shifted[k] = values[k] + tau * values[k].abs().max(floor);
+            }
+            if self.try_llt(&shifted)? {
+                self.last_shift_exp = e;
+                self.solve_factored(rhs)?;
+                return Ok(tau);
+            }
+        }
+        Err(FemError::Linear(
+            "no shift up to 100 times the diagonal makes the matrix positive definite".into(),
+        ))
+    }
+
+    /// Cholesky of A kept as the factor when A is positive definite; false when it is not.
+    fn try_llt(&mut self, values: &[f64]) -> Result<bool> {
         self.factor = Factor::None;
         if values.len() != self.row_idx.len() {
             return Err(FemError::Linear("matrix has the wrong size".into()));
         }
         if self.n == 0 {
-            return Ok(());
+            return Ok(true);
         }
         if values.iter().any(|v| !v.is_finite()) {
             return Err(FemError::Linear("matrix contains NaN or infinity".into()));
         }
-        let a = SparseColMatRef::new(
-            SymbolicSparseColMatRef::new_checked(
-                self.n,
-                self.n,
-                &self.col_ptr,
-                None,
-                &self.row_idx,
-            ),
-            values,
-        );
+        let a = matrix(self.n, &self.col_ptr, &self.row_idx, values);
         if self.llt.is_none() {
             let sym = factorize_symbolic_cholesky(
                 a.symbolic(),
@@ -129,23 +205,8 @@ impl SparseSolver {
         );
         if llt.is_ok() {
             self.factor = Factor::Llt;
-            return Ok(());
         }
-        self.lu_fallbacks += 1;
-        if self.lu.is_none() {
-            self.lu = Some(
-                SymbolicLu::try_new(a.symbolic())
-                    .map_err(|e| FemError::Linear(format!("symbolic LU: {e:?}")))?,
-            );
-        }
-        let sym = self
-            .lu
-            .clone()
-            .ok_or_else(|| FemError::Linear("no symbolic LU".into()))?;
-        let f = Lu::try_new_with_symbolic(sym, a)
-            .map_err(|e| FemError::Linear(format!("singular matrix: {e:?}")))?;
-        self.factor = Factor::Lu(Box::new(f));
-        Ok(())
+        Ok(llt.is_ok())
     }
 
     /// Solves with the factor of the last successful [`SparseSolver::factorize`].
@@ -240,6 +301,74 @@ mod tests {
         assert_eq!(s.lu_fallbacks, 1);
         let mut x = b.clone();
         assert!(s.solve(&vec![f64::NAN; v.len()], &mut x).is_err());
+    }
+
+    /// On a positive definite matrix `solve_descent` is the plain solve; on an indefinite one
+    /// it solves the least shifted matrix of its ladder that Cholesky accepts, so that the step
+    /// descends (b . x > 0), and the next call starts its ladder near that shift.
+    #[test]
+    fn descent_solve_shifts_only_indefinite_matrices() {
+        let n: usize = 40;
+        let (cp, ri, v) = tridiagonal(n, 2.0);
+        let b: Vec<f64> = (0..n).map(|i| 1.0 + (i as f64).cos()).collect();
+        let mut s = SparseSolver::new(n, cp.clone(), ri.clone());
+        let mut x = b.clone();
+        assert_eq!(s.solve_descent(&v, &mut x).unwrap(), 0.0);
+        let mut y = b.clone();
+        SparseSolver::new(n, cp.clone(), ri.clone())
+            .solve(&v, &mut y)
+            .unwrap();
+        assert!(x.iter().zip(&y).all(|(a, b)| (a - b).abs() < 1e-12));
+        // diagonal 1.5 - 0.5 i / n: the last rows make it indefinite (eigenvalues reach below 0)
+        let diag = |i: usize| 1.5 - 0.5 * i as f64 / n as f64 - 0.6;
+        let vals: Vec<f64> = v
+            .iter()
+            .enumerate()
+            .map(|(k, &x)| {
+                let col = cp.partition_point(|&p| p <= k) - 1;
+                if ri[k] == col { diag(col) } else { x }
+            })
+            .collect();
+        let mut x = b.clone();
+        let tau = s.solve_descent(&vals, &mut x).unwrap();
+        assert!(tau > 0.0, "an indefinite matrix needs a shift");
+        assert!(x.iter().zip(&b).map(|(a, b)| a * b).sum::<f64>() > 0.0);
+        // (A + tau |diag A|) x = b, row by row
+        for i in 0..n {
+            let d = diag(i) + tau * diag(i).abs();
+            let mut ax = d * x[i];
+            if i > 0 {
+                ax -= x[i - 1];
+            }
+            if i + 1 < n {
+                ax -= x[i + 1];
+            }
+            assert!((ax - b[i]).abs() < 1e-8 * (1.0 + d.abs()), "row {i}");
+        }
+        // the shift is the least of the ladder: a tenth of it does not factor
+        let lower: Vec<f64> = vals
+            .iter()
+            .enumerate()
+            .map(|(k, &x)| {
+                let col = cp.partition_point(|&p| p <= k) - 1;
+                if ri[k] == col {
+                    x + 0.1 * tau * x.abs()
+                } else {
+                    x
+                }
+            })
+            .collect();
+        let mut z = b.clone();
+        let mut fresh = SparseSolver::new(n, cp.clone(), ri.clone());
+        fresh.solve(&lower, &mut z).unwrap();
+        assert_eq!(
+            fresh.lu_fallbacks, 1,
+            "a tenth of the shift stays indefinite"
+        );
+        assert_eq!(
+            s.lu_fallbacks, 0,
+            "the descent solve never falls back to LU"
+        );
     }
 
     /// One factorization serves several right-hand sides, each solved as a fresh `solve` would.
