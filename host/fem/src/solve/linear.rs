@@ -267,6 +267,17 @@ mod tests {
         (cp, ri, v)
     }
 
+    /// `v` with each diagonal entry replaced by `f(column, entry)`.
+    fn map_diag(cp: &[usize], ri: &[usize], v: &[f64], f: impl Fn(usize, f64) -> f64) -> Vec<f64> {
+        v.iter()
+            .enumerate()
+            .map(|(k, &x)| {
+                let col = cp.partition_point(|&p| p <= k) - 1;
+                if ri[k] == col { f(col, x) } else { x }
+            })
+            .collect()
+    }
+
     /// 1-D Laplacian (SPD) and an indefinite variant, against residual checks.
     #[test]
     fn solves_spd_and_indefinite() {
@@ -275,15 +286,7 @@ mod tests {
         let b: Vec<f64> = (0..n).map(|i| (i as f64).sin()).collect();
         let mut s = SparseSolver::new(n, cp.clone(), ri.clone());
         for shift in [0.0, -1.5] {
-            let vals: Vec<f64> = v
-                .iter()
-                .zip(&ri)
-                .enumerate()
-                .map(|(k, (&x, _))| {
-                    let col = cp.partition_point(|&p| p <= k) - 1;
-                    if ri[k] == col { x + shift } else { x }
-                })
-                .collect();
+            let vals = map_diag(&cp, &ri, &v, |_, x| x + shift);
             let mut x = b.clone();
             s.solve(&vals, &mut x).unwrap();
             for i in 0..n {
@@ -319,16 +322,9 @@ mod tests {
             .solve(&v, &mut y)
             .unwrap();
         assert!(x.iter().zip(&y).all(|(a, b)| (a - b).abs() < 1e-12));
-        // diagonal 1.5 - 0.5 i / n: the last rows make it indefinite (eigenvalues reach below 0)
+        // diagonal 0.9 - 0.5 i / n under off-diagonal -1: indefinite (eigenvalues reach below 0)
         let diag = |i: usize| 1.5 - 0.5 * i as f64 / n as f64 - 0.6;
-        let vals: Vec<f64> = v
-            .iter()
-            .enumerate()
-            .map(|(k, &x)| {
-                let col = cp.partition_point(|&p| p <= k) - 1;
-                if ri[k] == col { diag(col) } else { x }
-            })
-            .collect();
+        let vals = map_diag(&cp, &ri, &v, |col, _| diag(col));
         let mut x = b.clone();
         let tau = s.solve_descent(&vals, &mut x).unwrap();
         assert!(tau > 0.0, "an indefinite matrix needs a shift");
@@ -346,18 +342,7 @@ mod tests {
             assert!((ax - b[i]).abs() < 1e-8 * (1.0 + d.abs()), "row {i}");
         }
         // the shift is the least of the ladder: a tenth of it does not factor
-        let lower: Vec<f64> = vals
-            .iter()
-            .enumerate()
-            .map(|(k, &x)| {
-                let col = cp.partition_point(|&p| p <= k) - 1;
-                if ri[k] == col {
-                    x + 0.1 * tau * x.abs()
-                } else {
-                    x
-                }
-            })
-            .collect();
+        let lower = map_diag(&cp, &ri, &vals, |_, x| x + 0.1 * tau * x.abs());
         let mut z = b.clone();
         let mut fresh = SparseSolver::new(n, cp.clone(), ri.clone());
         fresh.solve(&lower, &mut z).unwrap();
