@@ -75,6 +75,11 @@ pub enum NpeCommand {
         /// is kept, the loss weights and the contact head are these options'.
         #[arg(long)]
         init_from: Option<PathBuf>,
+        /// Add the training samples turned half a turn about the top face's centre and/or
+        /// mirrored across its centre lines (comma-separated: rot180, mirror-x, mirror-y);
+        /// validation and test samples stay as measured.
+        #[arg(long, value_delimiter = ',')]
+        symmetries: Vec<ocm_npe::symmetry::Symmetry>,
         /// Leave the contact points out (the ablation without geometry).
         #[arg(long)]
         no_geometry: bool,
@@ -240,6 +245,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             lambda_contact,
             node_gap,
             init_from,
+            symmetries,
             no_geometry,
             no_force,
             json,
@@ -264,6 +270,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
                 lambda_contact,
                 node_gap,
                 init_from,
+                symmetries,
                 test_setups,
                 val_setups,
                 progress: !json,

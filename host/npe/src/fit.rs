@@ -13,6 +13,7 @@ use serde::{Deserialize, Serialize};
 use crate::data::{Prepared, SetupSplit};
 use crate::engine::{Npe, Surface};
 use crate::model::{NpeConfig, NpeNet};
+use crate::symmetry::{self, Symmetry};
 use crate::{NpeError, Result};
 
 /// How to train.
@@ -61,6 +62,10 @@ pub struct FitOptions {
     /// options'. The split must be the one it was trained with.
     #[serde(default)]
     pub init_from: Option<PathBuf>,
+    /// Symmetries of the top face whose images of the training samples are added to the
+    /// training set ([`crate::symmetry`]; validation and test stay as measured).
+    #[serde(default)]
+    pub symmetries: Vec<Symmetry>,
     /// Show a progress bar.
     pub progress: bool,
 }
@@ -85,6 +90,7 @@ impl Default for FitOptions {
             lambda_contact: 1.0,
             node_gap: false,
             init_from: None,
+            symmetries: Vec::new(),
             progress: false,
         }
     }
@@ -192,13 +198,22 @@ fn start_from(path: &std::path::Path, split: &SetupSplit) -> Result<Npe> {
 /// Trains an engine on `p` split by set-up.
 pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
     let split = SetupSplit::new(p, opts.test_setups, opts.val_setups, opts.seed)?;
-    let idx = Split {
+    let mut idx = Split {
         train: p.samples_of(&split.train),
         val: p.samples_of(&split.val),
     };
     if idx.train.is_empty() {
         return Err(NpeError::Data("no training samples".into()));
     }
+    let with_images;
+    let p = if opts.symmetries.is_empty() {
+        p
+    } else {
+        let (q, added) = symmetry::augmented(p, &idx.train, &opts.symmetries)?;
+        idx.train.extend(added);
+        with_images = q;
+        &with_images
+    };
     let start = match &opts.init_from {
         Some(path) => Some(start_from(path, &split)?),
         None => None,

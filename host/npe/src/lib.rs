@@ -11,6 +11,7 @@
 //! - [`kernel`]: the engine's forward pass on plain values (one call, no tensors).
 //! - [`eval`]: Table 6.1 against the FEM. [`bench`]: latency per call.
 //! - [`stiffness`]: the total force read from a displacement field.
+//! - [`symmetry`]: turned and mirrored indentations to augment the training set.
 
 pub mod bench;
 pub mod data;
@@ -22,6 +23,7 @@ pub mod fit;
 pub mod kernel;
 pub mod model;
 pub mod stiffness;
+pub mod symmetry;
 
 pub use engine::{Fields, Npe, Surface};
 pub use error::{NpeError, Result};

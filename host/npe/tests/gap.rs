@@ -7,34 +7,14 @@ use ocm_npe::data::{GAP_REACH_M, NodeLocator, Prepared};
 use ocm_npe::model::NpeConfig;
 use ocm_npe::{Npe, Surface};
 
+mod common;
+
 const Z_TOP_M: f64 = 2e-3;
 const SPACING_M: f64 = 0.25e-3;
 
 /// A 26 x 26 grid of nodes 0.2 mm apart (5 x 5 mm) at z = 2 mm, triangulated.
 fn fine_surface() -> Surface {
-    let (nx, ny) = (26, 26);
-    let id = |i: usize, j: usize| j * nx + i;
-    let mut rest_m = Vec::new();
-    for j in 0..ny {
-        for i in 0..nx {
-            rest_m.push([i as f64 * 0.2e-3, j as f64 * 0.2e-3, Z_TOP_M]);
-        }
-    }
-    let mut edges = Vec::new();
-    for j in 0..ny {
-        for i in 0..nx {
-            if i + 1 < nx {
-                edges.push([id(i, j), id(i + 1, j)]);
-            }
-            if j + 1 < ny {
-                edges.push([id(i, j), id(i, j + 1)]);
-            }
-            if i + 1 < nx && j + 1 < ny {
-                edges.push([id(i, j), id(i + 1, j + 1)]);
-            }
-        }
-    }
-    Surface { rest_m, edges }
+    common::grid_surface(26, 26, 0.2e-3, Z_TOP_M)
 }
 
 /// Contact points of a flat cylindrical punch of radius `r_m` centred at (cx, cy), `depth_m`

@@ -7,31 +7,11 @@ use ocm_npe::fit::{FitOptions, fit, loss};
 use ocm_npe::model::NpeConfig;
 use ocm_npe::{Npe, NpeError, Surface};
 
+mod common;
+
 /// A 7 x 6 grid of nodes 1 mm apart at z = 2 mm, triangulated.
 fn surface() -> Surface {
-    let (nx, ny) = (7, 6);
-    let id = |i: usize, j: usize| j * nx + i;
-    let mut rest_m = Vec::new();
-    for j in 0..ny {
-        for i in 0..nx {
-            rest_m.push([i as f64 * 1e-3, j as f64 * 1e-3, 2e-3]);
-        }
-    }
-    let mut edges = Vec::new();
-    for j in 0..ny {
-        for i in 0..nx {
-            if i + 1 < nx {
-                edges.push([id(i, j), id(i + 1, j)]);
-            }
-            if j + 1 < ny {
-                edges.push([id(i, j), id(i, j + 1)]);
-            }
-            if i + 1 < nx && j + 1 < ny {
-                edges.push([id(i, j), id(i + 1, j + 1)]);
-            }
-        }
-    }
-    Surface { rest_m, edges }
+    common::grid_surface(7, 6, 1e-3, 2e-3)
 }
 
 fn engine(seed: u64) -> Npe {
