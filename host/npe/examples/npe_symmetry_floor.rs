@@ -2,9 +2,11 @@
 //! half a turn about the top face's centre, compared node by node after the turn. The volume
 //! mesh of DIGIT_v8 is not symmetric (its top face is), so the difference is the FEM's own
 //! discretisation: the label noise that `ocm npe train --symmetries rot180` adds, and a floor
-//! under the contact-node accuracy any engine can reach against this FEM.
+//! under the contact-node accuracy any engine can reach against this FEM. The mesh-converged
+//! answers of a set-up and its copy are each other's images, so half the RMSE printed is a
+//! lower bound on the FEM's own discretisation error in one of the two runs.
 //!
-//! Two steps:
+//! Three steps (the FEM of the copies is the middle one):
 //!
 //! ```text
 //! cargo run -p ocm-npe --example npe_symmetry_floor -- write /tmp/symdata sphere,edge
@@ -14,7 +16,7 @@
 //! ```
 //!
 //! `write` makes a data folder beside the real one: links to every entry of its `digit/` but
-//! the set-up file, which holds the named set-ups and their turned copies (`<name>_rot180`:
+//! the set-up files, which hold the named set-ups and their turned copies (`<name>_rot180`:
 //! the origin turned about the centre, 180 degrees added to the z angle, exact for the set-up
 //! files' R = Rz Ry Rx). `compare` prints, per pair and depth, the displacement RMSE between
 //! the turned field and the copy's, the share of top nodes whose contact state (-u_z > 30 um)
@@ -56,34 +58,43 @@ fn write(out: &Path, names: &[String]) -> Res<()> {
     for entry in std::fs::read_dir(&digit)? {
         let entry = entry?;
         let link = target.join(entry.file_name());
-        if entry.file_name() == "indenter_settings.json" || link.exists() {
+        let settings = ["indenter_settings.json", "unseen_indenter_settings.json"];
+        if settings.iter().any(|s| entry.file_name() == *s) || link.exists() {
             continue;
         }
         std::os::unix::fs::symlink(entry.path(), link)?;
     }
-    let text = std::fs::read_to_string(digit.join("indenter_settings.json"))?;
-    let all: Vec<serde_json::Value> = serde_json::from_str(&text)?;
-    let mut kept = Vec::new();
-    for name in names {
-        let s = all
-            .iter()
-            .find(|s| s["name"] == name.as_str())
-            .ok_or_else(|| format!("no set-up {name} in indenter_settings.json"))?;
-        let mut turned = s.clone();
-        turned["name"] = format!("{name}_rot180").into();
-        // The set-up files give the origin in mm; the centre is in m.
-        let t: Vec<f64> = serde_json::from_value(s["translation"].clone())?;
-        let p = Symmetry::Rot180.point([c[0] * 1e3, c[1] * 1e3], [t[0], t[1], t[2]]);
-        turned["translation"] = serde_json::json!(p);
-        let mut e: Vec<f64> = serde_json::from_value(s["orientation"].clone())?;
-        e[2] += 180.0;
-        turned["orientation"] = serde_json::json!(e);
-        kept.push(s.clone());
-        kept.push(turned);
+    // Each set-up file keeps its own named set-ups and their turned copies (an unseen
+    // indenter's STL is looked up in the unseen folder).
+    let mut found = vec![false; names.len()];
+    for file in ["indenter_settings.json", "unseen_indenter_settings.json"] {
+        let text = std::fs::read_to_string(digit.join(file))?;
+        let all: Vec<serde_json::Value> = serde_json::from_str(&text)?;
+        let mut kept = Vec::new();
+        for (k, name) in names.iter().enumerate() {
+            let Some(s) = all.iter().find(|s| s["name"] == name.as_str()) else {
+                continue;
+            };
+            found[k] = true;
+            let mut turned = s.clone();
+            turned["name"] = format!("{name}_rot180").into();
+            // The set-up files give the origin in mm; the centre is in m.
+            let t: Vec<f64> = serde_json::from_value(s["translation"].clone())?;
+            let p = Symmetry::Rot180.point([c[0] * 1e3, c[1] * 1e3], [t[0], t[1], t[2]]);
+            turned["translation"] = serde_json::json!(p);
+            let mut e: Vec<f64> = serde_json::from_value(s["orientation"].clone())?;
+            e[2] += 180.0;
+            turned["orientation"] = serde_json::json!(e);
+            kept.push(s.clone());
+            kept.push(turned);
+        }
+        let path = target.join(file);
+        std::fs::write(&path, serde_json::to_string_pretty(&kept)?)?;
+        println!("{} set-ups in {}", kept.len(), path.display());
     }
-    let path = target.join("indenter_settings.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&kept)?)?;
-    println!("{} set-ups in {}", kept.len(), path.display());
+    if let Some(k) = found.iter().position(|f| !f) {
+        return Err(format!("no set-up {} in the set-up files", names[k]).into());
+    }
     Ok(())
 }
 
