@@ -25,7 +25,6 @@
 use std::path::{Path, PathBuf};
 
 use ocm_npe::data::Prepared;
-use ocm_npe::model::NpeConfig;
 use ocm_npe::symmetry::{self, Symmetry};
 use ocm_tactile::dataset::{Dataset, TopSurface};
 use ocm_tactile::gel::{Gel, GelMaterial};
@@ -100,8 +99,7 @@ fn write(out: &Path, names: &[String]) -> Res<()> {
 
 fn compare(dir: &Path, names: &[String], json: bool) -> Res<()> {
     let ds = Dataset::read(dir)?;
-    let p = Prepared::from_dataset(&ds, &NpeConfig::new([0.0; 3], 1e-3).scales);
-    let perm = symmetry::permutation(&p, Symmetry::Rot180)?;
+    let perm = symmetry::permutation(&ds.top_rest_m, Symmetry::Rot180)?;
     let find = |n: &str| {
         ds.setups
             .iter()

@@ -13,7 +13,7 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use crate::data::{Prepared, Sample};
+use crate::data::{NodeLocator, Prepared, Sample};
 use crate::{NpeError, Result};
 
 /// Largest x-y distance between a node's image and the node it lands on, m: far below the
@@ -89,15 +89,15 @@ impl FromStr for Symmetry {
 /// The node permutation of `symmetry` on the top nodes `rest_m` about their bounding box's
 /// centre: `perm[i]` is the node at node i's image. An error names the first node whose image
 /// is not a node (within [`SYMMETRY_TOLERANCE_M`]) or that two nodes share.
-pub fn permutation(prepared: &Prepared, symmetry: Symmetry) -> Result<Vec<usize>> {
-    let rest = &prepared.rest_m;
-    let c = Prepared::top_center(rest);
-    let mut perm = Vec::with_capacity(rest.len());
-    let mut taken = vec![false; rest.len()];
-    for (i, p) in rest.iter().enumerate() {
+pub fn permutation(rest_m: &[[f64; 3]], symmetry: Symmetry) -> Result<Vec<usize>> {
+    let locator = NodeLocator::new(rest_m);
+    let c = Prepared::top_center(rest_m);
+    let mut perm = Vec::with_capacity(rest_m.len());
+    let mut taken = vec![false; rest_m.len()];
+    for (i, p) in rest_m.iter().enumerate() {
         let q = symmetry.point([c[0], c[1]], *p);
-        let hit = prepared.locator.nearest(q[0], q[1]).filter(|&j| {
-            let r = &rest[j];
+        let hit = locator.nearest(q[0], q[1]).filter(|&j| {
+            let r = &rest_m[j];
             (r[0] - q[0]).hypot(r[1] - q[1]) <= SYMMETRY_TOLERANCE_M
                 && (r[2] - q[2]).abs() <= SYMMETRY_TOLERANCE_M
         });
@@ -163,7 +163,7 @@ pub fn augmented(
         if symmetries[..k].contains(&s) {
             continue;
         }
-        let perm = permutation(prepared, s)?;
+        let perm = permutation(&prepared.rest_m, s)?;
         for &i in idx {
             let sample = prepared.samples.get(i).ok_or_else(|| {
                 NpeError::Data(format!(

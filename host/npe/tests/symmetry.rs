@@ -121,7 +121,7 @@ fn images_are_the_mapped_indentations() {
         (Symmetry::MirrorY, |i, j| (i, 6 - j), [3e-3, 1e-3]),
     ];
     for (sym, node, point) in by_hand {
-        let perm = symmetry::permutation(&p, sym).unwrap();
+        let perm = symmetry::permutation(&p.rest_m, sym).unwrap();
         for (k, &image) in perm.iter().enumerate() {
             let (i, j) = node(k % 9, k / 9);
             assert_eq!(image, j * 9 + i, "{sym}: node {k}");
@@ -134,7 +134,7 @@ fn images_are_the_mapped_indentations() {
         assert_eq!(q[2], 1.9e-3);
     }
     for sym in Symmetry::ALL {
-        let perm = symmetry::permutation(&p, sym).unwrap();
+        let perm = symmetry::permutation(&p.rest_m, sym).unwrap();
         // An involution: applied twice, every node comes back.
         assert!((0..perm.len()).all(|i| perm[perm[i]] == i), "{sym}");
         assert!((0..perm.len()).any(|i| perm[i] != i), "{sym} moved no node");
@@ -159,7 +159,9 @@ fn asymmetric_faces_and_unknown_names_are_refused() {
         vec![dent(&rest, [1e-3, 1e-3], [1.0, 0.0], 1e-4, 0)],
     );
     for sym in Symmetry::ALL {
-        let e = symmetry::permutation(&p, sym).unwrap_err().to_string();
+        let e = symmetry::permutation(&p.rest_m, sym)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("not symmetric") && e.contains(sym.name()), "{e}");
     }
     assert_eq!("rot180".parse::<Symmetry>(), Ok(Symmetry::Rot180));
