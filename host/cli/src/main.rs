@@ -18,6 +18,7 @@ mod cmd_surrogate;
 mod cmd_tactile;
 mod cmd_tactile_net;
 mod cmd_track;
+mod heap;
 mod plot;
 mod plot_track;
 mod progress;
@@ -69,6 +70,7 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
+    heap::keep_freed_memory();
     match run(Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
