@@ -1650,7 +1650,8 @@ fn fem_folders(roots: &[PathBuf]) -> anyhow::Result<Vec<(String, PathBuf)>> {
 
 fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
     use ocm_tactile::reduced::{
-        FemSequence, ReducedModel, ReducedOptions, score_sequence, worst_frame,
+        FemSequence, ReducedModel, ReducedOptions, deepest_depth_within, score_sequence,
+        worst_frame,
     };
     if !(a.penalty_scale.is_finite() && a.penalty_scale > 0.0) {
         bail!(
@@ -1796,6 +1797,7 @@ fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
                 "rmse_mm_median": median(&all_rmse) * 1e3,
                 "rmse_mm_max": max(&all_rmse) * 1e3,
                 "frames_rmse_within_0_05_mm": all_rmse.iter().filter(|&&e| e <= 0.05e-3).count(),
+                "depth_mm_every_frame_within_0_05_mm": deepest_depth_within(&scores, 0.05e-3).map(|d| d * 1e3),
                 "rmse_top_mm_median": median(&top_rmse) * 1e3,
                 "rmse_top_mm_max": max(&top_rmse) * 1e3,
                 "projection_rmse_mm_median": median(&proj) * 1e3,

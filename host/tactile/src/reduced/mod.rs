@@ -32,5 +32,7 @@ pub use enrich::{
     DEFAULT_FOOTPRINT_LOADS, Enrichment, FOOTPRINT_LOADS, FOOTPRINT_RIM_M, NodalLoads,
     RestStiffness, check_footprint_loads, footprint_load_cases, placement_model, second_order_mode,
 };
-pub use score::{FemSequence, SequenceScore, WorstFrame, score_sequence, worst_frame};
+pub use score::{
+    FemSequence, SequenceScore, WorstFrame, deepest_depth_within, score_sequence, worst_frame,
+};
 pub use solve::{ReducedFrame, ReducedIndentation, ReducedOptions};

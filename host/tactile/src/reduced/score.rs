@@ -231,3 +231,30 @@ pub fn worst_frame(scores: &[SequenceScore]) -> Option<WorstFrame> {
             projection_rmse_m: s.projection_rmse_m[k],
         })
 }
+
+/// The deepest depth, m, up to which every scored frame's nodal RMSE is at most `tol_m`: the
+/// depth range in which the reduced model holds a tolerance on every held-out set-up. `None`
+/// when the shallowest frame already misses it (or nothing was scored).
+pub fn deepest_depth_within(scores: &[SequenceScore], tol_m: f64) -> Option<f64> {
+    let mut frames: Vec<(f64, f64)> = scores
+        .iter()
+        .flat_map(|s| s.depth_m.iter().copied().zip(s.rmse_m.iter().copied()))
+        .collect();
+    frames.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut deepest = None;
+    let mut k = 0;
+    while k < frames.len() {
+        // Frames at one depth pass or fail together.
+        let d = frames[k].0;
+        let mut all_ok = true;
+        while k < frames.len() && frames[k].0 == d {
+            all_ok &= frames[k].1 <= tol_m;
+            k += 1;
+        }
+        if !all_ok {
+            break;
+        }
+        deepest = Some(d);
+    }
+    deepest
+}

@@ -325,6 +325,24 @@ fn reduced_solve_generalises_to_a_held_out_placement() {
     assert_eq!(w.depth_m, depths[k]);
     assert_eq!(w.projection_rmse_m, score.projection_rmse_m[k]);
     assert!(worst_frame(&[]).is_none());
+    // The depth range within a tolerance: every frame up to it within, the next depth not.
+    let tol = score.rmse_m[0] * 1.0001;
+    let within = deepest_depth_within(std::slice::from_ref(&score), tol);
+    let first_miss = score.rmse_m.iter().position(|&e| e > tol);
+    match first_miss {
+        Some(0) => assert_eq!(within, None),
+        Some(m) => assert_eq!(within, Some(depths[m - 1])),
+        None => assert_eq!(within, depths.last().copied()),
+    }
+    assert_eq!(
+        deepest_depth_within(std::slice::from_ref(&score), f64::INFINITY),
+        depths.last().copied()
+    );
+    assert_eq!(
+        deepest_depth_within(std::slice::from_ref(&score), 0.0),
+        None
+    );
+    assert_eq!(deepest_depth_within(&[], 1.0), None);
 
     // With the footprint modes of this placement: orthonormal columns, the stiffness
     // equal to Phi^T K_0 Phi of the grown basis, a lower projection limit at every depth and
@@ -547,4 +565,35 @@ fn footprint_loads_follow_the_indenter_geometry() {
         loads: &["foot", "sideways"],
     };
     assert!(placement_model(&m, bad, &gel, &punch, &approach, 0.1e-3).is_err());
+}
+
+/// Two held-out sequences: a depth counts only when both of its frames meet the tolerance, and
+/// the range ends at the first depth that does not, whatever deeper frames do.
+#[test]
+fn depth_range_needs_every_sequence_within() {
+    let seq = |name: &str, depth_m: Vec<f64>, rmse_m: Vec<f64>| SequenceScore {
+        setup: name.into(),
+        frames: depth_m.len(),
+        rmse_top_m: rmse_m.clone(),
+        projection_rmse_m: rmse_m.clone(),
+        force_z_n: vec![[0.0; 2]; depth_m.len()],
+        depth_m,
+        rmse_m,
+        max_penetration_m: 0.0,
+        passes: 0,
+        queries: 0,
+        seconds: Vec::new(),
+    };
+    let a = seq(
+        "a",
+        vec![1e-4, 2e-4, 3e-4, 4e-4],
+        vec![1e-5, 2e-5, 6e-5, 1e-5],
+    );
+    let b = seq("b", vec![1e-4, 2e-4, 3e-4], vec![1e-5, 4e-5, 2e-5]);
+    let both = [a.clone(), b.clone()];
+    assert_eq!(deepest_depth_within(&both, 5e-5), Some(2e-4));
+    assert_eq!(deepest_depth_within(&both, 3e-5), Some(1e-4));
+    assert_eq!(deepest_depth_within(&both, 6e-5), Some(4e-4));
+    assert_eq!(deepest_depth_within(&[b], 5e-5), Some(3e-4));
+    assert_eq!(deepest_depth_within(&both, 5e-6), None);
 }
