@@ -29,6 +29,7 @@ use ocm_npe::symmetry::{self, Symmetry};
 use ocm_tactile::dataset::{Dataset, TopSurface};
 use ocm_tactile::gel::{Gel, GelMaterial};
 use ocm_tactile::mask::CONTACT_THRESHOLD_M;
+use ocm_tactile::metrics::nodal_rmse;
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
 
@@ -113,18 +114,20 @@ fn compare(dir: &Path, names: &[String], json: bool) -> Res<()> {
         let mut rows = Vec::new();
         for k in 0..steps {
             let (ua, ub) = (&a.displacement_m[k], &b.displacement_m[k]);
-            let (mut sq, mut agree) = (0.0, 0usize);
-            for (i, &j) in perm.iter().enumerate() {
-                let turned = Symmetry::Rot180.vector(ua[j]);
-                sq += (0..3).map(|d| (turned[d] - ub[i][d]).powi(2)).sum::<f64>();
-                agree += usize::from(
-                    (-turned[2] > CONTACT_THRESHOLD_M) == (-ub[i][2] > CONTACT_THRESHOLD_M),
-                );
-            }
+            // a's field turned: node i takes its image node's displacement, turned
+            let turned: Vec<[f64; 3]> = perm
+                .iter()
+                .map(|&j| Symmetry::Rot180.vector(ua[j]))
+                .collect();
+            let agree = turned
+                .iter()
+                .zip(ub)
+                .filter(|(t, u)| (-t[2] > CONTACT_THRESHOLD_M) == (-u[2] > CONTACT_THRESHOLD_M))
+                .count();
             let n = perm.len() as f64;
             rows.push(serde_json::json!({
                 "depth_mm": a.depth_m[k] * 1e3,
-                "rmse_mm": (sq / n).sqrt() * 1e3,
+                "rmse_mm": nodal_rmse(&turned, ub)? * 1e3,
                 "contact_agreement_pct": 100.0 * agree as f64 / n,
                 "force_z_n": [a.force_n[k][2], b.force_n[k][2]],
             }));
