@@ -142,35 +142,29 @@ impl Loop<'_> {
     }
 
     /// Free-run output of the extended model on rows `..rows`; `None` when it diverges.
+    ///
+    /// Every finite-difference column and damped step of the refinement is one such run (70 %
+    /// of the identification's time), so the per-row helpers are forced inline and repeated
+    /// work is shared; each sum keeps its terms and their order, so the output is the same to
+    /// the last bit as the plain loop's (the refinements are that sensitive).
     fn simulate(&self, th: &[f64], rows: usize) -> Option<Vec<f64>> {
-        let m = self.lay.m;
-        // the next state `A x + B u_i + B_f f` (`B (u_i + f)` when the force enters as the
-        // input does)
-        let step = |xn: &mut [f64],
-                    ax: &[f64],
-                    bf: &[f64],
-                    ff: Option<&[f64]>,
-                    i: usize,
-                    force: &[f64]| {
-            for j in 0..xn.len() {
-                let mut acc = ax[j];
-                match ff {
-                    None => {
-                        for k in 0..m {
-                            acc += bf[j * m + k] * (self.du[k][i] + force[k]);
-                        }
-                    }
-                    Some(ff) => {
-                        for k in 0..m {
-                            acc += bf[j * m + k] * self.du[k][i] + ff[j * m + k] * force[k];
-                        }
-                    }
-                }
-                xn[j] = acc;
-            }
-        };
+        // the usual orders as constants, so that the state loops unroll
+        match self.lay.n {
+            1 => self.simulate_order::<1>(th, rows),
+            2 => self.simulate_order::<2>(th, rows),
+            3 => self.simulate_order::<3>(th, rows),
+            4 => self.simulate_order::<4>(th, rows),
+            5 => self.simulate_order::<5>(th, rows),
+            6 => self.simulate_order::<6>(th, rows),
+            _ => self.simulate_order::<0>(th, rows),
+        }
+    }
+
+    /// [`Self::simulate`] for order `N` (0: the layout's order, known only at run time).
+    fn simulate_order<const N: usize>(&self, th: &[f64], rows: usize) -> Option<Vec<f64>> {
         let l = &self.lay;
-        let (n, m, ns) = (l.n, l.m, self.signals.len());
+        let n = if N > 0 { N } else { l.n };
+        let (m, ns) = (l.m, self.signals.len());
         debug_assert!(ns <= 24);
         let a = DMatrix::from_column_slice(n, n, &th[l.a()..l.b()]);
         let b = DMatrix::from_column_slice(n, m, &th[l.b()..l.c()]);
@@ -190,6 +184,31 @@ impl Loop<'_> {
         let lu = (DMatrix::<f64>::identity(n, n) - &a).lu();
         let cz = self.internal_coordinate(&lu, &b, cv, &th[l.cz()..l.len()]);
         let cz = cz.as_slice();
+        // the Coulomb sign's `tanh(v / v0)` again inside the Stribeck peak of the same `v0`:
+        // computed once per row (the signal it is taken from comes first)
+        let tanh_of: Vec<Option<usize>> = self
+            .signals
+            .iter()
+            .enumerate()
+            .map(|(q, sig)| match *sig {
+                LoopSignal::Stribeck(v0, _) => self.signals[..q]
+                    .iter()
+                    .position(|s| matches!(*s, LoopSignal::Sign(u) if u == v0)),
+                _ => None,
+            })
+            .collect();
+        // one drive (the usual case): the force summed in a register, in the same order
+        let one_drive = m == 1 && self.map.iter().all(|&(k, _)| k == 0);
+        let rt = RowTerms {
+            n,
+            m,
+            du: &self.du,
+            inputs: &self.inputs,
+            bf: &bf,
+            ff: ff.as_deref(),
+            dv,
+            bias,
+        };
         let mut out = vec![0.0; rows];
         let mut x = vec![0.0; n];
         let mut xn = vec![0.0; n];
@@ -214,21 +233,11 @@ impl Loop<'_> {
                 x0_at += n;
             }
             force.iter_mut().for_each(|f| *f = 0.0);
-            let y_of = |c: &[f64], x: &[f64], i: usize| -> f64 {
-                let mut y = bias;
-                for j in 0..n {
-                    y += c[j] * x[j];
-                }
-                for k in 0..m {
-                    y += dv[k] * self.inputs[k][i];
-                }
-                y
-            };
-            let mut z_prev = y_of(cz, &x, s);
+            let mut z_prev = rt.output(cz, &x, s);
             let mut first = true;
             for i in s..e {
-                let y = y_of(cv, &x, i);
-                let z = y_of(cz, &x, i);
+                let y = rt.output(cv, &x, i);
+                let z = rt.output(cz, &x, i);
                 // A x, shared by the look-ahead and the step (the same sums in the same order
                 // as computing each in full).
                 for j in 0..n {
@@ -240,9 +249,9 @@ impl Loop<'_> {
                 }
                 // the next state with the force held: a one-step look-ahead gives a central
                 // velocity without a half-sample lag at reversals
-                step(&mut xn, &ax, &bf, ff.as_deref(), i, &force);
+                rt.step(&mut xn, &ax, i, &force);
                 let (z_next, t_next) = if i + 1 < e {
-                    (y_of(cz, &xn, i + 1), self.time_s[i + 1])
+                    (rt.output(cz, &xn, i + 1), self.time_s[i + 1])
                 } else {
                     (z, self.time_s[i])
                 };
@@ -263,11 +272,24 @@ impl Loop<'_> {
                 }
                 let mut phi = [0.0; 24];
                 for (q, sig) in self.signals.iter().enumerate() {
-                    phi[q] = sig.eval(z, v, &mut plays[q]);
+                    phi[q] = match (*sig, tanh_of[q]) {
+                        (LoopSignal::Stribeck(_, vs), Some(src)) => {
+                            phi[src] * (-(v / vs).powi(2)).exp()
+                        }
+                        _ => sig.eval(z, v, &mut plays[q]),
+                    };
                 }
-                force.iter_mut().for_each(|f| *f = 0.0);
-                for ((wj, &(k, q)), &(f, _)) in w.iter().zip(&self.map).zip(&self.factor) {
-                    force[k] += wj * f * phi[q];
+                if one_drive {
+                    let mut f0 = 0.0;
+                    for ((wj, &(_, q)), &(f, _)) in w.iter().zip(&self.map).zip(&self.factor) {
+                        f0 += wj * f * phi[q];
+                    }
+                    force[0] = f0;
+                } else {
+                    force.iter_mut().for_each(|f| *f = 0.0);
+                    for ((wj, &(k, q)), &(f, _)) in w.iter().zip(&self.map).zip(&self.factor) {
+                        force[k] += wj * f * phi[q];
+                    }
                 }
                 let mut out_i = y;
                 for k in 0..m {
@@ -275,7 +297,7 @@ impl Loop<'_> {
                 }
                 out[i] = out_i;
                 z_prev = z;
-                step(&mut xn, &ax, &bf, ff.as_deref(), i, &force);
+                rt.step(&mut xn, &ax, i, &force);
                 std::mem::swap(&mut x, &mut xn);
                 if !out_i.is_finite() || x.iter().any(|v| !v.is_finite() || v.abs() > 1e150) {
                     return None;
@@ -283,6 +305,60 @@ impl Loop<'_> {
             }
         }
         Some(out)
+    }
+}
+
+/// The per-row terms of a free run that do not change along it.
+struct RowTerms<'a> {
+    n: usize,
+    m: usize,
+    /// The inputs' deviations (what `B` multiplies), per input.
+    du: &'a [Vec<f64>],
+    /// The inputs as recorded (what `D` multiplies), per input.
+    inputs: &'a [&'a [f64]],
+    /// `B`, row-major.
+    bf: &'a [f64],
+    /// The force's own entry, row-major, where it differs from `B`.
+    ff: Option<&'a [f64]>,
+    dv: &'a [f64],
+    bias: f64,
+}
+
+impl RowTerms<'_> {
+    /// `c x + D u_i + d`: the output (`c = C`) or the internal coordinate (`c = c_z`).
+    #[inline(always)]
+    fn output(&self, c: &[f64], x: &[f64], i: usize) -> f64 {
+        let mut y = self.bias;
+        for j in 0..self.n {
+            y += c[j] * x[j];
+        }
+        for k in 0..self.m {
+            y += self.dv[k] * self.inputs[k][i];
+        }
+        y
+    }
+
+    /// The next state `A x + B u_i + B_f f` (`B (u_i + f)` when the force enters as the input
+    /// does), from `ax = A x`.
+    #[inline(always)]
+    fn step(&self, xn: &mut [f64], ax: &[f64], i: usize, force: &[f64]) {
+        let m = self.m;
+        for j in 0..self.n {
+            let mut acc = ax[j];
+            match self.ff {
+                None => {
+                    for k in 0..m {
+                        acc += self.bf[j * m + k] * (self.du[k][i] + force[k]);
+                    }
+                }
+                Some(ff) => {
+                    for k in 0..m {
+                        acc += self.bf[j * m + k] * self.du[k][i] + ff[j * m + k] * force[k];
+                    }
+                }
+            }
+            xn[j] = acc;
+        }
     }
 }
 
