@@ -105,6 +105,11 @@ struct Loop<'a> {
     factor: Vec<(f64, bool)>,
     /// The baseline's [`StateSpace::entry_lag`] (samples), held while `A` and `B` are refined.
     entry_lag: f64,
+    /// Per signal: for a Stribeck peak, the earlier Coulomb sign of the same `v0` whose
+    /// `tanh(v / v0)` it reuses ([`LoopSignal::shared_sign`]).
+    sign_of: Vec<Option<usize>>,
+    /// One drive (the usual case): the force is summed in a register, in the same order.
+    one_drive: bool,
 }
 
 impl Loop<'_> {
@@ -184,21 +189,6 @@ impl Loop<'_> {
         let lu = (DMatrix::<f64>::identity(n, n) - &a).lu();
         let cz = self.internal_coordinate(&lu, &b, cv, &th[l.cz()..l.len()]);
         let cz = cz.as_slice();
-        // the Coulomb sign's `tanh(v / v0)` again inside the Stribeck peak of the same `v0`:
-        // computed once per row (the signal it is taken from comes first)
-        let tanh_of: Vec<Option<usize>> = self
-            .signals
-            .iter()
-            .enumerate()
-            .map(|(q, sig)| match *sig {
-                LoopSignal::Stribeck(v0, _) => self.signals[..q]
-                    .iter()
-                    .position(|s| matches!(*s, LoopSignal::Sign(u) if u == v0)),
-                _ => None,
-            })
-            .collect();
-        // one drive (the usual case): the force summed in a register, in the same order
-        let one_drive = m == 1 && self.map.iter().all(|&(k, _)| k == 0);
         let rt = RowTerms {
             n,
             m,
@@ -272,14 +262,14 @@ impl Loop<'_> {
                 }
                 let mut phi = [0.0; 24];
                 for (q, sig) in self.signals.iter().enumerate() {
-                    phi[q] = match (*sig, tanh_of[q]) {
+                    phi[q] = match (*sig, self.sign_of[q]) {
                         (LoopSignal::Stribeck(_, vs), Some(src)) => {
-                            phi[src] * (-(v / vs).powi(2)).exp()
+                            phi[src] * LoopSignal::stribeck_decay(v, vs)
                         }
                         _ => sig.eval(z, v, &mut plays[q]),
                     };
                 }
-                if one_drive {
+                if self.one_drive {
                     let mut f0 = 0.0;
                     for ((wj, &(_, q)), &(f, _)) in w.iter().zip(&self.map).zip(&self.factor) {
                         f0 += wj * f * phi[q];
@@ -320,7 +310,9 @@ struct RowTerms<'a> {
     bf: &'a [f64],
     /// The force's own entry, row-major, where it differs from `B`.
     ff: Option<&'a [f64]>,
+    /// `D`, per input.
     dv: &'a [f64],
+    /// The output's offset `d`.
     bias: f64,
 }
 
@@ -444,6 +436,10 @@ impl Prepared<'_> {
             .zip(&ss.u_mean)
             .map(|(u, mu)| u.iter().map(|v| v - mu).collect())
             .collect();
+        let sign_of = (0..ns)
+            .map(|q| LoopSignal::shared_sign(&signals, q))
+            .collect();
+        let one_drive = m == 1 && map.iter().all(|&(k, _)| k == 0);
         let lp = Loop {
             lay,
             du,
@@ -454,6 +450,8 @@ impl Prepared<'_> {
             map,
             factor,
             entry_lag: ss.entry_lag,
+            sign_of,
+            one_drive,
         };
         let lay = &lp.lay;
         // start: the baseline's dynamics, the joint fit's output map and weights, and the

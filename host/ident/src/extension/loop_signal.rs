@@ -31,9 +31,25 @@ impl LoopSignal {
             }
             LoopSignal::Sign(v0) => (v / v0).tanh(),
             LoopSignal::Viscous(vs) => v / vs,
-            LoopSignal::Stribeck(v0, vs) => (v / v0).tanh() * (-(v / vs).powi(2)).exp(),
+            LoopSignal::Stribeck(v0, vs) => (v / v0).tanh() * Self::stribeck_decay(v, vs),
             LoopSignal::Power(m, r, p) => ((y - m) / r).powi(p),
             LoopSignal::Mixed(m, r, vs, p, q) => ((y - m) / r).powi(p) * (v / vs).powi(q),
+        }
+    }
+
+    /// The Stribeck peak's decay with speed, `exp(-(v / vs)^2)`.
+    pub(super) fn stribeck_decay(v: f64, vs: f64) -> f64 {
+        (-(v / vs).powi(2)).exp()
+    }
+
+    /// For a Stribeck peak at `signals[q]`, the index of an earlier Coulomb sign of the same
+    /// `v0`: its value `tanh(v / v0)` is the peak's first factor, computed once per step.
+    pub(super) fn shared_sign(signals: &[LoopSignal], q: usize) -> Option<usize> {
+        match signals[q] {
+            LoopSignal::Stribeck(v0, _) => signals[..q]
+                .iter()
+                .position(|s| matches!(*s, LoopSignal::Sign(u) if u == v0)),
+            _ => None,
         }
     }
 
