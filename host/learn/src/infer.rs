@@ -6,7 +6,7 @@
 use burn::nn::Linear;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
-use wide::f32x8;
+use pulp::{Simd, WithSimd};
 
 use crate::deepsets::DeepSets;
 use crate::gcn::{Gcn, Graph, LAYER_NORM_EPSILON};
@@ -26,11 +26,19 @@ impl Activation {
     /// Applies the nonlinearity to every value in place.
     pub fn apply_slice(self, v: &mut [f32]) {
         if self == Self::Relu {
-            let (chunks, rest) = v.as_chunks_mut::<LANES>();
-            for c in chunks {
-                *c = f32x8::from(*c).fast_max(f32x8::splat(0.0)).to_array();
+            /// ReLU on the widest vectors the CPU has ([`DenseGcn::forward`] says why).
+            struct Relu<'a>(&'a mut [f32]);
+            impl WithSimd for Relu<'_> {
+                type Output = ();
+                #[inline(always)]
+                fn with_simd<S: Simd>(self, simd: S) {
+                    let (head, tail) = S::as_mut_simd_f32s(self.0);
+                    let zero = simd.splat_f32s(0.0);
+                    head.iter_mut().for_each(|c| *c = simd.max_f32s(*c, zero));
+                    tail.iter_mut().for_each(|x| *x = x.max(0.0));
+                }
             }
-            rest.iter_mut().for_each(|x| *x = x.max(0.0));
+            pulp::Arch::new().dispatch(Relu(v));
         } else {
             v.iter_mut().for_each(|x| *x = self.scalar(*x));
         }
@@ -219,20 +227,13 @@ impl DenseDeepSets {
     }
 }
 
-/// Eight lanes: the node-state loops run on `wide`'s portable SIMD type, which keeps them
-/// vectorised even where the crate is built without LLVM's auto-vectoriser (the workspace's
-/// dev profile).
-const LANES: usize = 8;
+/// Rows of node states are padded to a multiple of this many values: every vector width pulp
+/// dispatches to (1, 4, 8 or 16 lanes) divides it, so a row is whole vectors on every CPU.
+const ROW_ALIGN: usize = 16;
 
-fn lanes(v: &[f32]) -> Vec<f32x8> {
-    v.chunks(LANES)
-        .map(|c| {
-            let mut a = [0.0f32; LANES];
-            a[..c.len()].copy_from_slice(c);
-            f32x8::from(a)
-        })
-        .collect()
-}
+/// Rows of node states a GCN layer computes at a time (their means and products take 32 kB
+/// each at width 32).
+const GCN_BLOCK_ROWS: usize = 256;
 
 /// Neighbour-mean aggregation of a fixed graph in compressed rows: for each node, its
 /// neighbours and 1 / degree (an isolated node's mean is zero).
@@ -272,43 +273,59 @@ impl NeighbourMean {
         self.inv_degree.len()
     }
 
-    /// `out[v] = mean_{u in N(v)} h[u]` for node rows of `row` vectors.
-    fn apply(&self, h: &[f32x8], row: usize, out: &mut [f32x8]) {
+    /// `out[v - first] = mean_{u in N(v)} h[u]` for the nodes `v` from `first` on that `out`
+    /// holds, node rows of `row` vectors.
+    #[inline(always)]
+    fn apply<S: Simd>(
+        &self,
+        simd: S,
+        h: &[S::f32s],
+        row: usize,
+        first: usize,
+        out: &mut [S::f32s],
+    ) {
         // The common widths get a fixed-length accumulator the compiler keeps in registers.
         match row {
-            1 => self.apply_fixed::<1>(h, out),
-            2 => self.apply_fixed::<2>(h, out),
-            4 => self.apply_fixed::<4>(h, out),
-            8 => self.apply_fixed::<8>(h, out),
+            1 => self.apply_fixed::<S, 1>(simd, h, first, out),
+            2 => self.apply_fixed::<S, 2>(simd, h, first, out),
+            4 => self.apply_fixed::<S, 4>(simd, h, first, out),
+            8 => self.apply_fixed::<S, 8>(simd, h, first, out),
             _ => {
-                for (v, acc) in out.chunks_exact_mut(row).enumerate() {
-                    acc.fill(f32x8::splat(0.0));
+                for (v, acc) in (first..).zip(out.chunks_exact_mut(row)) {
+                    acc.fill(simd.splat_f32s(0.0));
                     for &u in &self.neighbours[self.offsets[v]..self.offsets[v + 1]] {
                         for (a, &x) in acc.iter_mut().zip(&h[u * row..(u + 1) * row]) {
-                            *a += x;
+                            *a = simd.add_f32s(*a, x);
                         }
                     }
-                    let s = f32x8::splat(self.inv_degree[v]);
-                    acc.iter_mut().for_each(|a| *a *= s);
+                    let s = simd.splat_f32s(self.inv_degree[v]);
+                    acc.iter_mut().for_each(|a| *a = simd.mul_f32s(*a, s));
                 }
             }
         }
     }
 
-    fn apply_fixed<const R: usize>(&self, h: &[f32x8], out: &mut [f32x8]) {
+    #[inline(always)]
+    fn apply_fixed<S: Simd, const R: usize>(
+        &self,
+        simd: S,
+        h: &[S::f32s],
+        first: usize,
+        out: &mut [S::f32s],
+    ) {
         let (rows, _) = h.as_chunks::<R>();
         let (outs, _) = out.as_chunks_mut::<R>();
-        for (v, o) in outs.iter_mut().enumerate() {
-            let mut acc = [f32x8::splat(0.0); R];
+        for (v, o) in (first..).zip(outs.iter_mut()) {
+            let mut acc = [simd.splat_f32s(0.0); R];
             for &u in &self.neighbours[self.offsets[v]..self.offsets[v + 1]] {
                 let x = &rows[u];
                 for k in 0..R {
-                    acc[k] += x[k];
+                    acc[k] = simd.add_f32s(acc[k], x[k]);
                 }
             }
-            let s = f32x8::splat(self.inv_degree[v]);
+            let s = simd.splat_f32s(self.inv_degree[v]);
             for k in 0..R {
-                o[k] = acc[k] * s;
+                o[k] = simd.mul_f32s(acc[k], s);
             }
         }
     }
@@ -316,12 +333,12 @@ impl NeighbourMean {
 
 /// One residual layer `h + ReLU(LN(W mean_N h))` with the LayerNorm's centring folded into
 /// the weight (`W (I - 11^T / w)`, so the product is already centred per row), padded to whole
-/// vectors with zeros (padded lanes stay zero).
+/// rows of [`ROW_ALIGN`] values with zeros (padded lanes stay zero).
 #[derive(Debug, Clone, PartialEq)]
 struct DenseGcnLayer {
     centred_weight: Vec<f32>,
-    gamma: Vec<f32x8>,
-    beta: Vec<f32x8>,
+    gamma: Vec<f32>,
+    beta: Vec<f32>,
 }
 
 /// A [`Gcn`] on a fixed graph as plain layers.
@@ -333,6 +350,12 @@ pub struct DenseGcn {
     mean: NeighbourMean,
 }
 
+/// `v` followed by zeros up to `len` values.
+fn padded_to(mut v: Vec<f32>, len: usize) -> Vec<f32> {
+    v.resize(len, 0.0);
+    v
+}
+
 impl DenseGcn {
     /// Copies the weights of a burn GCN for `graph`.
     pub fn new(gcn: &Gcn, graph: &Graph) -> Self {
@@ -340,7 +363,7 @@ impl DenseGcn {
             .layers
             .first()
             .map_or(0, |l| l.linear().weight.dims()[1]);
-        let padded = width.div_ceil(LANES) * LANES;
+        let padded = width.div_ceil(ROW_ALIGN) * ROW_ALIGN;
         let layers = gcn
             .layers
             .iter()
@@ -357,12 +380,12 @@ impl DenseGcn {
                 let norm = l.norm();
                 DenseGcnLayer {
                     centred_weight: centred,
-                    gamma: lanes(&values(norm.gamma.val())),
-                    beta: lanes(
-                        &norm
-                            .beta
+                    gamma: padded_to(values(norm.gamma.val()), padded),
+                    beta: padded_to(
+                        norm.beta
                             .as_ref()
                             .map_or_else(|| vec![0.0; w], |b| values(b.val())),
+                        padded,
                     ),
                 }
             })
@@ -381,55 +404,87 @@ impl DenseGcn {
     }
 
     /// Propagates node states `[nodes, batch, width]` (row-major) through every layer, in
-    /// place.
+    /// place. The node-state loops run on the widest vectors the CPU has, chosen at run time
+    /// (the crate is built for baseline x86-64, whose SSE2 holds 4 values per instruction).
     pub fn forward(&self, h: &mut [f32], batch: usize) {
-        let (w, vecs) = (self.width, self.padded / LANES);
-        let rows = self.mean.num_nodes() * batch;
-        debug_assert_eq!(h.len(), rows * w);
-        let eps = LAYER_NORM_EPSILON as f32;
-        let mut x = vec![f32x8::splat(0.0); rows * vecs];
-        for (xr, hr) in x.chunks_exact_mut(vecs).zip(h.chunks_exact(w)) {
-            let flat: &mut [f32] = bytemuck::cast_slice_mut(xr);
-            flat[..w].copy_from_slice(hr);
+        /// pulp's dispatch inlines `with_simd` into a function compiled with the detected
+        /// target features (a closure's body would not be).
+        struct Propagate<'a>(&'a DenseGcn, &'a mut [f32], usize);
+        impl WithSimd for Propagate<'_> {
+            type Output = ();
+            #[inline(always)]
+            fn with_simd<S: Simd>(self, simd: S) {
+                self.0.forward_in(simd, self.1, self.2);
+            }
         }
-        let mut m = vec![f32x8::splat(0.0); x.len()];
-        let mut z = vec![f32x8::splat(0.0); x.len()];
-        let inv_w = f32x8::splat(1.0 / w as f32);
-        let eps = f32x8::splat(eps);
-        // 1 / sqrt(variance + eps) per row, computed eight rows at a time: one square root
+        pulp::Arch::new().dispatch(Propagate(self, h, batch));
+    }
+
+    #[inline(always)]
+    fn forward_in<S: Simd>(&self, simd: S, h: &mut [f32], batch: usize) {
+        let (w, p) = (self.width, self.padded);
+        let nodes = self.mean.num_nodes();
+        let rows = nodes * batch;
+        debug_assert_eq!(h.len(), rows * w);
+        let mut x = vec![0.0f32; rows * p];
+        for (xr, hr) in x.chunks_exact_mut(p).zip(h.chunks_exact(w)) {
+            xr[..w].copy_from_slice(hr);
+        }
+        // A layer reads the previous layer's states whole (the neighbour means) and writes the
+        // next ones block by block, so the means and products of a block stay in cache.
+        let mut next = vec![0.0f32; x.len()];
+        let block_nodes = GCN_BLOCK_ROWS.div_ceil(batch).max(1);
+        let block_rows = block_nodes * batch;
+        let mut m = vec![0.0f32; block_rows * p];
+        let mut z = vec![0.0f32; block_rows * p];
+        let vecs = p / S::F32_LANES;
+        let zero = simd.splat_f32s(0.0);
+        let inv_w = 1.0 / w as f32;
+        let eps = simd.splat_f32s(LAYER_NORM_EPSILON as f32);
+        // 1 / sqrt(variance + eps) per row, the square roots a vector of rows at a time: one
         // per row would otherwise be a serial chain.
-        let mut inv = vec![0.0f32; rows.div_ceil(LANES) * LANES];
+        let mut inv = vec![0.0f32; block_rows.div_ceil(ROW_ALIGN) * ROW_ALIGN];
         for l in &self.layers {
-            self.mean.apply(&x, batch * vecs, &mut m);
-            gemm(
-                bytemuck::cast_slice_mut(&mut z),
-                bytemuck::cast_slice(&m),
-                &l.centred_weight,
-                rows,
-                self.padded,
-                self.padded,
-                false,
-            );
-            for (v, zr) in inv.iter_mut().zip(z.chunks_exact(vecs)) {
-                *v = zr
-                    .iter()
-                    .fold(f32x8::splat(0.0), |a, &q| a + q * q)
-                    .reduce_add();
-            }
-            for c in inv.as_chunks_mut::<LANES>().0 {
-                let var = f32x8::from(*c) * inv_w;
-                *c = (f32x8::splat(1.0) / (var + eps).sqrt()).to_array();
-            }
-            for ((xr, zr), &s) in x.chunks_exact_mut(vecs).zip(z.chunks_exact(vecs)).zip(&inv) {
-                let s = f32x8::splat(s);
-                for (((xv, &zv), &g), &b) in xr.iter_mut().zip(zr).zip(&l.gamma).zip(&l.beta) {
-                    *xv += (zv * s * g + b).fast_max(f32x8::splat(0.0));
+            let gamma = S::as_simd_f32s(&l.gamma).0;
+            let beta = S::as_simd_f32s(&l.beta).0;
+            for first in (0..nodes).step_by(block_nodes) {
+                let n = (nodes - first).min(block_nodes) * batch;
+                let (m, z) = (&mut m[..n * p], &mut z[..n * p]);
+                let xv = S::as_simd_f32s(&x).0;
+                self.mean
+                    .apply(simd, xv, batch * vecs, first, S::as_mut_simd_f32s(m).0);
+                gemm(z, m, &l.centred_weight, n, p, p, false);
+                let zv = S::as_simd_f32s(z).0;
+                for (v, zr) in inv.iter_mut().zip(zv.chunks_exact(vecs)) {
+                    let sq = zr.iter().fold(zero, |a, &q| simd.mul_add_f32s(q, q, a));
+                    *v = simd.reduce_sum_f32s(sq) * inv_w;
+                }
+                for c in S::as_mut_simd_f32s(&mut inv).0 {
+                    *c =
+                        simd.div_f32s(simd.splat_f32s(1.0), simd.sqrt_f32s(simd.add_f32s(*c, eps)));
+                }
+                let rows = first * batch * vecs..(first * batch + n) * vecs;
+                let xr = xv[rows.clone()].chunks_exact(vecs);
+                let yv = &mut S::as_mut_simd_f32s(&mut next).0[rows];
+                for (((yr, xr), zr), &s) in yv
+                    .chunks_exact_mut(vecs)
+                    .zip(xr)
+                    .zip(zv.chunks_exact(vecs))
+                    .zip(&inv)
+                {
+                    let s = simd.splat_f32s(s);
+                    for ((((yv, &xv), &zv), &g), &b) in
+                        yr.iter_mut().zip(xr).zip(zr).zip(gamma).zip(beta)
+                    {
+                        let y = simd.mul_add_f32s(simd.mul_f32s(zv, s), g, b);
+                        *yv = simd.add_f32s(xv, simd.max_f32s(y, zero));
+                    }
                 }
             }
+            std::mem::swap(&mut x, &mut next);
         }
-        for (hr, xr) in h.chunks_exact_mut(w).zip(x.chunks_exact(vecs)) {
-            let flat: &[f32] = bytemuck::cast_slice(xr);
-            hr.copy_from_slice(&flat[..w]);
+        for (hr, xr) in h.chunks_exact_mut(w).zip(x.chunks_exact(p)) {
+            hr.copy_from_slice(&xr[..w]);
         }
     }
 }
@@ -498,17 +553,47 @@ mod tests {
             layers: 3,
         }
         .init(&device, 2);
-        // A ring of 7 nodes with a chord, plus an isolated node.
-        let mut edges: Vec<[usize; 2]> = (0..7).map(|i| [i, (i + 1) % 7]).collect();
-        edges.push([0, 3]);
-        let g = Graph::from_edges(8, &edges).unwrap();
-        let x: Vec<f32> = (0..8 * 2 * 6).map(|i| (i as f32 * 0.29).sin()).collect();
-        let want = values(gcn.forward(
-            Tensor::<3>::from_data(TensorData::new(x.clone(), [8, 2, 6]), &device),
-            &g.tensors(&device),
-        ));
-        let mut h = x;
-        DenseGcn::new(&gcn, &g).forward(&mut h, 2);
-        close(&h, &want, 1e-4);
+        // A ring of 7 nodes with a chord, plus an isolated node; and a ring of 300 nodes with
+        // chords, whose layers take several blocks of rows (GCN_BLOCK_ROWS) with a partial
+        // last one.
+        let mut small: Vec<[usize; 2]> = (0..7).map(|i| [i, (i + 1) % 7]).collect();
+        small.push([0, 3]);
+        let mut large: Vec<[usize; 2]> = (0..300).map(|i| [i, (i + 1) % 300]).collect();
+        large.extend((0..300).step_by(7).map(|i| [i, (i * 13 + 5) % 300]));
+        for (nodes, edges) in [(8, small), (300, large)] {
+            let batch = 2;
+            let g = Graph::from_edges(nodes, &edges).unwrap();
+            let x: Vec<f32> = (0..nodes * batch * 6)
+                .map(|i| (i as f32 * 0.29).sin())
+                .collect();
+            let want = values(gcn.forward(
+                Tensor::<3>::from_data(TensorData::new(x.clone(), [nodes, batch, 6]), &device),
+                &g.tensors(&device),
+            ));
+            let dense = DenseGcn::new(&gcn, &g);
+            let mut h = x.clone();
+            dense.forward(&mut h, batch);
+            close(&h, &want, 1e-4);
+            // Every vector width the dispatch may pick (1, 4, 8 and 16 lanes), whatever this
+            // CPU has: a row is whole vectors on each.
+            for lanes in [1, 4, 8, 16] {
+                let mut h = x.clone();
+                match lanes {
+                    1 => dense.forward_in(pulp::Scalar::new(), &mut h, batch),
+                    4 => dense.forward_in(pulp::Scalar128b, &mut h, batch),
+                    8 => dense.forward_in(pulp::Scalar256b, &mut h, batch),
+                    _ => dense.forward_in(pulp::Scalar512b, &mut h, batch),
+                }
+                close(&h, &want, 1e-4);
+            }
+        }
+    }
+
+    #[test]
+    fn relu_on_any_length_clears_only_negatives() {
+        let mut v: Vec<f32> = (0..37).map(|i| (i as f32 * 0.9).sin()).collect();
+        let want: Vec<f32> = v.iter().map(|x| x.max(0.0)).collect();
+        Activation::Relu.apply_slice(&mut v);
+        assert_eq!(v, want);
     }
 }
