@@ -23,9 +23,13 @@ pub struct NodeLocator {
     cols: usize,
     rows: usize,
     /// Nodes of bucket `b`: `nodes[offsets[b]..offsets[b + 1]]`, in node order (one flat
-    /// array: a call visits up to 25 buckets per point).
+    /// array: a call visits up to 25 buckets per point). Buckets are row-major, so the buckets
+    /// of one row from column `c0` to `c1` are one range, `offsets[r * cols + c0]..offsets[r *
+    /// cols + c1 + 1]`.
     offsets: Vec<usize>,
     nodes: Vec<usize>,
+    /// x-y of `nodes[k]` at `k`: a search reads positions in the order it visits them.
+    sorted_xy: Vec<[f64; 2]>,
 }
 
 impl NodeLocator {
@@ -65,6 +69,10 @@ impl NodeLocator {
             nodes[fill[b]] = i;
             fill[b] += 1;
         }
+        let sorted_xy = nodes
+            .iter()
+            .map(|&i| [rest_m[i][0], rest_m[i][1]])
+            .collect();
         NodeLocator {
             rest_m: rest_m.to_vec(),
             origin: lo,
@@ -73,13 +81,16 @@ impl NodeLocator {
             rows,
             offsets,
             nodes,
+            sorted_xy,
         }
     }
 
-    /// The nodes of bucket (row `r`, column `c`).
-    fn bucket(&self, r: usize, c: usize) -> &[usize] {
-        let b = r * self.cols + c;
-        &self.nodes[self.offsets[b]..self.offsets[b + 1]]
+    /// Positions in `nodes` (and `sorted_xy`) of the buckets of row `r` over `cols`.
+    fn row_span(&self, r: usize, cols: &std::ops::Range<usize>) -> std::ops::Range<usize> {
+        if cols.is_empty() {
+            return 0..0;
+        }
+        self.offsets[r * self.cols + cols.start]..self.offsets[r * self.cols + cols.end]
     }
 
     /// Bucket rows and columns within one ring of the bucket holding (x, y), clipped to the
@@ -101,19 +112,19 @@ impl NodeLocator {
     /// The node nearest to (x, y) within about one bucket, if any.
     pub fn nearest(&self, x: f64, y: f64) -> Option<usize> {
         let (rows, cols) = self.ring(x, y);
+        // Visited in bucket order, and within a bucket in node order; the first of equally
+        // near nodes wins.
         let mut best: Option<(f64, usize)> = None;
         for rr in rows {
-            for cc in cols.clone() {
-                for &i in self.bucket(rr, cc) {
-                    let p = &self.rest_m[i];
-                    let d = (p[0] - x).powi(2) + (p[1] - y).powi(2);
-                    if best.is_none_or(|(b, _)| d < b) {
-                        best = Some((d, i));
-                    }
+            let span = self.row_span(rr, &cols);
+            for (k, p) in span.clone().zip(&self.sorted_xy[span]) {
+                let d = (p[0] - x).powi(2) + (p[1] - y).powi(2);
+                if best.is_none_or(|(b, _)| d < b) {
+                    best = Some((d, k));
                 }
             }
         }
-        best.map(|(_, i)| i)
+        best.map(|(_, k)| self.nodes[k])
     }
 
     /// Appends the scaled penetration of every node by `points` (the deepest point nearest to
@@ -167,13 +178,15 @@ impl NodeLocator {
             let h = GAP_REACH_M;
             let (c0, c1) = (at(p[0] - h, 0).max(0), at(p[0] + h, 0).min(cols - 1));
             let (r0, r1) = (at(p[1] - h, 1).max(0), at(p[1] + h, 1).min(rows - 1));
+            if c0 > c1 {
+                continue;
+            }
+            let cols = c0 as usize..c1 as usize + 1;
             for rr in r0..=r1 {
-                for cc in c0..=c1 {
-                    for &i in self.bucket(rr as usize, cc as usize) {
-                        let q = self.rest_m[i];
-                        let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
-                        offer(&mut best[i], d2, p[2]);
-                    }
+                let span = self.row_span(rr as usize, &cols);
+                for (&i, q) in self.nodes[span.clone()].iter().zip(&self.sorted_xy[span]) {
+                    let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
+                    offer(&mut best[i], d2, p[2]);
                 }
             }
         }
