@@ -181,9 +181,9 @@ impl NodeLocator {
             if c0 > c1 {
                 continue;
             }
-            let cols = c0 as usize..c1 as usize + 1;
+            let reach_cols = c0 as usize..c1 as usize + 1;
             for rr in r0..=r1 {
-                let span = self.row_span(rr as usize, &cols);
+                let span = self.row_span(rr as usize, &reach_cols);
                 for (&i, q) in self.nodes[span.clone()].iter().zip(&self.sorted_xy[span]) {
                     let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
                     offer(&mut best[i], d2, p[2]);
