@@ -80,6 +80,12 @@ pub enum NpeCommand {
         /// validation and test samples stay as measured.
         #[arg(long, value_delimiter = ',')]
         symmetries: Vec<ocm_npe::symmetry::Symmetry>,
+        /// More data sets of `ocm tactile dataset` on the same gel (comma-separated folders,
+        /// e.g. random placements of the seen indenters) whose set-ups all go to training: the
+        /// split of --dataset's set-ups stays what it is without them. --symmetries applies to
+        /// their samples too.
+        #[arg(long, value_delimiter = ',')]
+        extra_train: Vec<PathBuf>,
         /// Leave the contact points out (the ablation without geometry).
         #[arg(long)]
         no_geometry: bool,
@@ -246,14 +252,23 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             node_gap,
             init_from,
             symmetries,
+            extra_train,
             no_geometry,
             no_force,
             json,
         } => {
+            let scales = ocm_npe::model::NpeConfig::new([0.0; 3], 1e-3).scales;
             let ds = Dataset::read(&dataset)?;
-            let p =
-                Prepared::from_dataset(&ds, &ocm_npe::model::NpeConfig::new([0.0; 3], 1e-3).scales);
+            let mut p = Prepared::from_dataset(&ds, &scales);
             drop(ds);
+            let mut train_only = Vec::new();
+            for dir in &extra_train {
+                // An unseen indenter's set-up among them is refused by the split.
+                let extra = Prepared::from_dataset(&Dataset::read(dir)?, &scales);
+                train_only.extend(extra.setup_names.iter().cloned());
+                p.append(extra)
+                    .with_context(|| format!("--extra-train {}", dir.display()))?;
+            }
             let opts = FitOptions {
                 epochs,
                 batch_size: batch,
@@ -271,6 +286,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
                 node_gap,
                 init_from,
                 symmetries,
+                train_only,
                 test_setups,
                 val_setups,
                 progress: !json,
@@ -283,6 +299,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
                 "options": opts,
                 "config": r.npe.config,
                 "dataset": dataset.display().to_string(),
+                "extra_train": extra_train.iter().map(|d| d.display().to_string()).collect::<Vec<_>>(),
                 "train_samples": r.train_samples,
                 "best_epoch": r.best_epoch,
                 "best_val_loss": r.best_loss,

@@ -312,6 +312,17 @@ pub fn contact_gate(node_depth: &[f32], edges: &[[usize; 2]], out: &mut Vec<f32>
     }
 }
 
+/// Whether two top faces, each as (rest positions in m, edges), are the same: the same edges
+/// and every node within a nanometre (a surface stored in JSON keeps about that).
+pub fn same_surface(a: (&[[f64; 3]], &[[usize; 2]]), b: (&[[f64; 3]], &[[usize; 2]])) -> bool {
+    a.0.len() == b.0.len()
+        && a.1 == b.1
+        && a.0
+            .iter()
+            .zip(b.0)
+            .all(|(p, q)| (0..3).all(|k| (p[k] - q[k]).abs() < 1e-9))
+}
+
 /// One sample, scaled for the network, with the physical values the metrics need.
 #[derive(Debug, Clone)]
 pub struct Sample {
@@ -429,6 +440,45 @@ impl Prepared {
         x
     }
 
+    /// Appends the set-ups and samples of `other`, a data set of the same top face (rest
+    /// positions, edges and contact grid), e.g. extra placements for training only.
+    pub fn append(&mut self, other: Prepared) -> Result<()> {
+        if !same_surface((&other.rest_m, &other.edges), (&self.rest_m, &self.edges)) {
+            return Err(NpeError::Data(format!(
+                "the data set to append has another top surface ({} nodes, {} edges; this one \
+                 {} nodes, {} edges)",
+                other.rest_m.len(),
+                other.edges.len(),
+                self.rest_m.len(),
+                self.edges.len()
+            )));
+        }
+        if (other.spacing_m - self.spacing_m).abs() > 1e-12 {
+            return Err(NpeError::Data(format!(
+                "the data set to append has contact grid spacing {} m, this one {} m",
+                other.spacing_m, self.spacing_m
+            )));
+        }
+        if let Some(name) = other
+            .setup_names
+            .iter()
+            .find(|n| self.setup_names.contains(n))
+        {
+            return Err(NpeError::Data(format!(
+                "set-up '{name}' is in both data sets"
+            )));
+        }
+        let offset = self.setup_names.len();
+        self.setup_names.extend(other.setup_names);
+        self.setup_unseen.extend(other.setup_unseen);
+        self.without_points += other.without_points;
+        self.samples.extend(other.samples.into_iter().map(|mut s| {
+            s.setup += offset;
+            s
+        }));
+        Ok(())
+    }
+
     /// Sample indices of the named set-ups.
     pub fn samples_of(&self, names: &[String]) -> Vec<usize> {
         (0..self.samples.len())
@@ -454,11 +504,38 @@ pub struct SetupSplit {
 impl SetupSplit {
     /// A seeded split of the seen set-ups: `test` and `val` of them held out.
     pub fn new(p: &Prepared, test: usize, val: usize, seed: u64) -> Result<Self> {
+        Self::with_train_only(p, test, val, seed, &[])
+    }
+
+    /// [`SetupSplit::new`] over the seen set-ups other than `train_only`, which all go to
+    /// training: extra set-ups leave the held-out ones as they were without them.
+    pub fn with_train_only(
+        p: &Prepared,
+        test: usize,
+        val: usize,
+        seed: u64,
+        train_only: &[String],
+    ) -> Result<Self> {
+        for name in train_only {
+            match p.setup_names.iter().position(|n| n == name) {
+                None => {
+                    return Err(NpeError::Input(format!(
+                        "training-only set-up '{name}' is not in the data"
+                    )));
+                }
+                Some(i) if p.setup_unseen[i] => {
+                    return Err(NpeError::Input(format!(
+                        "set-up '{name}' is of an unseen indenter and cannot be trained on"
+                    )));
+                }
+                Some(_) => {}
+            }
+        }
         let mut seen: Vec<String> = p
             .setup_names
             .iter()
             .zip(&p.setup_unseen)
-            .filter(|(_, u)| !**u)
+            .filter(|(n, u)| !**u && !train_only.contains(n))
             .map(|(n, _)| n.clone())
             .collect();
         seen.sort();
@@ -477,7 +554,11 @@ impl SetupSplit {
         Ok(SetupSplit {
             test: sorted(&seen[..test]),
             val: sorted(&seen[test..test + val]),
-            train: sorted(&seen[test + val..]),
+            train: {
+                let mut t = sorted(&[&seen[test + val..], train_only].concat());
+                t.dedup();
+                t
+            },
             unseen: sorted(
                 &p.setup_names
                     .iter()

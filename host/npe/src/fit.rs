@@ -10,7 +10,7 @@ use ocm_learn::{EpochRecord, Split, TrainConfig, cpu_autodiff, train_split};
 use ocm_tactile::mask::CONTACT_THRESHOLD_M;
 use serde::{Deserialize, Serialize};
 
-use crate::data::{Prepared, SetupSplit};
+use crate::data::{Prepared, SetupSplit, same_surface};
 use crate::engine::{Npe, Surface};
 use crate::model::{NpeConfig, NpeNet};
 use crate::symmetry::{self, Symmetry};
@@ -66,6 +66,10 @@ pub struct FitOptions {
     /// training set ([`crate::symmetry`]; validation and test stay as measured).
     #[serde(default)]
     pub symmetries: Vec<Symmetry>,
+    /// Set-ups of the data that go to training only, outside the seeded split (extra
+    /// placements, say): the held-out set-ups stay those of the data without them.
+    #[serde(default)]
+    pub train_only: Vec<String>,
     /// Show a progress bar.
     pub progress: bool,
 }
@@ -91,6 +95,7 @@ impl Default for FitOptions {
             node_gap: false,
             init_from: None,
             symmetries: Vec::new(),
+            train_only: Vec::new(),
             progress: false,
         }
     }
@@ -177,13 +182,16 @@ pub fn bce_with_logits<const D: usize>(z: Tensor<D>, y: Tensor<D>) -> Tensor<1> 
     (y.clone() * pos + (ones - y) * neg).mean().neg()
 }
 
-/// The engine at `path` for fine-tuning, after checking it was trained on `split`: another
-/// split would put its training set-ups into the held-out ones.
+/// The engine at `path` for fine-tuning, after checking it was trained on `split`'s held-out
+/// set-ups and on no set-up `split` does not train on: another split would put its training
+/// set-ups into the held-out ones. `split` may train on more set-ups.
 fn start_from(path: &std::path::Path, split: &SetupSplit) -> Result<Npe> {
     let npe = Npe::load(path)?;
     let stored: SetupSplit = serde_json::from_value(Npe::run_meta(path)?["split"].clone())
         .map_err(|e| NpeError::Data(format!("{}: no set-up split stored: {e}", path.display())))?;
-    if &stored != split {
+    let same_held_out =
+        (&stored.test, &stored.val, &stored.unseen) == (&split.test, &split.val, &split.unseen);
+    if !same_held_out || stored.train.iter().any(|s| !split.train.contains(s)) {
         return Err(NpeError::Input(format!(
             "{} was trained on another split of set-ups (test {:?}, validation {:?}); \
              fine-tune with the seed and held-out counts it was trained with",
@@ -197,7 +205,13 @@ fn start_from(path: &std::path::Path, split: &SetupSplit) -> Result<Npe> {
 
 /// Trains an engine on `p` split by set-up.
 pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
-    let split = SetupSplit::new(p, opts.test_setups, opts.val_setups, opts.seed)?;
+    let split = SetupSplit::with_train_only(
+        p,
+        opts.test_setups,
+        opts.val_setups,
+        opts.seed,
+        &opts.train_only,
+    )?;
     let mut idx = Split {
         train: p.samples_of(&split.train),
         val: p.samples_of(&split.val),
@@ -258,15 +272,10 @@ pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
     let (g_ad, g_plain) = (graph.tensors(&ad), graph.tensors(&plain));
     let net = match start {
         Some(npe) => {
-            // The stored surface went through JSON: compare positions to a nanometre.
-            let same_nodes = npe.surface.rest_m.len() == p.rest_m.len()
-                && npe
-                    .surface
-                    .rest_m
-                    .iter()
-                    .zip(&p.rest_m)
-                    .all(|(a, b)| (0..3).all(|k| (a[k] - b[k]).abs() < 1e-9));
-            if !same_nodes || npe.surface.edges != p.edges {
+            if !same_surface(
+                (&npe.surface.rest_m, &npe.surface.edges),
+                (&p.rest_m, &p.edges),
+            ) {
                 return Err(NpeError::Data(
                     "the engine to fine-tune was trained on another top surface".into(),
                 ));

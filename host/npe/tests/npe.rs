@@ -471,6 +471,15 @@ fn contact_head_kernel_matches_burn_and_ignores_point_order() {
     assert_eq!(c, want);
 }
 
+/// Saves a trained engine with its split (what `--init-from` reads) to a temporary file.
+fn saved(r: &ocm_npe::fit::FitReport, tag: &str) -> std::path::PathBuf {
+    let path = std::env::temp_dir().join(format!("ocm-npe-{tag}-{}.ckpt", std::process::id()));
+    r.npe
+        .save(&path, serde_json::json!({"split": r.split}))
+        .unwrap();
+    path
+}
+
 /// Fine-tuning starts from the trained weights (at a vanishing step size the fields stay the
 /// source's), adds a contact head, refuses another split, and the head learns the known
 /// contact nodes of the synthetic dents.
@@ -478,10 +487,7 @@ fn contact_head_kernel_matches_burn_and_ignores_point_order() {
 fn fine_tuning_adds_a_contact_head_that_learns_the_contact_nodes() {
     let p = synthetic();
     let src = fit(&p, &small_fit(4)).unwrap();
-    let path = std::env::temp_dir().join(format!("ocm-npe-ft-{}.ckpt", std::process::id()));
-    src.npe
-        .save(&path, serde_json::json!({"split": src.split}))
-        .unwrap();
+    let path = saved(&src, "ft");
     let frozen = fit(
         &p,
         &FitOptions {
@@ -565,4 +571,113 @@ fn fine_tuning_adds_a_contact_head_that_learns_the_contact_nodes() {
     );
     eprintln!("contact-node accuracy: source (-u_z > 30 um) {acc0:.4}, fine-tuned head {acc:.4}");
     assert!(acc > 0.95 && acc > acc0, "{acc0} -> {acc}");
+}
+
+/// A copy of the synthetic set-ups under other names (`e0`..), with `unseen` flags.
+fn extra_setups(prefix: &str, unseen: bool) -> Prepared {
+    let mut q = synthetic();
+    q.setup_names = (0..q.setup_names.len())
+        .map(|k| format!("{prefix}{k}"))
+        .collect();
+    q.setup_unseen = vec![unseen; q.setup_names.len()];
+    q
+}
+
+/// Training-only set-ups join the training set and leave the seeded held-out set-ups as they
+/// are without them; unknown, unseen, duplicate and foreign-surface ones are refused.
+#[test]
+fn training_only_setups_leave_the_held_out_split_alone() {
+    use ocm_npe::data::SetupSplit;
+    let p = synthetic();
+    let mut q = synthetic();
+    q.append(extra_setups("e", false)).unwrap();
+    assert_eq!(q.samples.len(), 2 * p.samples.len());
+    assert_eq!(q.samples[p.samples.len()].setup, 4);
+    let extra: Vec<String> = (0..4).map(|k| format!("e{k}")).collect();
+    for seed in 0..6 {
+        let base = SetupSplit::new(&p, 1, 1, seed).unwrap();
+        let with = SetupSplit::with_train_only(&q, 1, 1, seed, &extra).unwrap();
+        assert_eq!((&with.test, &with.val), (&base.test, &base.val));
+        let mut want = [base.train.clone(), extra.clone()].concat();
+        want.sort();
+        assert_eq!(with.train, want);
+        // Without the flag the extra set-ups would enter the shuffle.
+        assert_eq!(SetupSplit::new(&q, 1, 1, seed).unwrap().train.len(), 6);
+    }
+    let refusal = |p: &Prepared, name: &str| {
+        SetupSplit::with_train_only(p, 1, 1, 0, &[name.to_string()])
+            .unwrap_err()
+            .to_string()
+    };
+    assert!(refusal(&q, "nope").contains("'nope' is not in the data"));
+    let mut u = synthetic();
+    u.append(extra_setups("u", true)).unwrap();
+    assert!(refusal(&u, "u2").contains("unseen"));
+    let mut twice = synthetic();
+    assert!(
+        twice
+            .append(synthetic())
+            .unwrap_err()
+            .to_string()
+            .contains("'s0' is in both")
+    );
+    let mut moved = extra_setups("m", false);
+    moved.rest_m[3][2] += 1e-6;
+    assert!(
+        twice
+            .append(moved)
+            .unwrap_err()
+            .to_string()
+            .contains("another top surface")
+    );
+    assert_eq!(
+        twice.samples.len(),
+        p.samples.len(),
+        "a refused append adds nothing"
+    );
+}
+
+/// An engine may be fine-tuned with more training set-ups than it was trained on, not with
+/// fewer, and the extra samples reach the optimiser.
+#[test]
+fn fine_tuning_takes_more_training_setups() {
+    let p = synthetic();
+    let src = fit(&p, &small_fit(4)).unwrap();
+    let path = saved(&src, "more");
+    let mut q = synthetic();
+    q.append(extra_setups("e", false)).unwrap();
+    let extra: Vec<String> = (0..4).map(|k| format!("e{k}")).collect();
+    let more = fit(
+        &q,
+        &FitOptions {
+            epochs: 1,
+            init_from: Some(path.clone()),
+            train_only: extra.clone(),
+            ..small_fit(4)
+        },
+    )
+    .unwrap();
+    assert_eq!(more.train_samples, src.train_samples + p.samples.len());
+    assert_eq!(
+        (&more.split.test, &more.split.val),
+        (&src.split.test, &src.split.val)
+    );
+    // The engine trained with the extra set-ups cannot be fine-tuned on the smaller split.
+    let path2 = saved(&more, "more2");
+    let fewer = fit(
+        &p,
+        &FitOptions {
+            epochs: 1,
+            init_from: Some(path2.clone()),
+            ..small_fit(4)
+        },
+    );
+    std::fs::remove_file(&path).ok();
+    std::fs::remove_file(&path2).ok();
+    assert!(
+        fewer
+            .as_ref()
+            .is_err_and(|e| e.to_string().contains("another split")),
+        "{fewer:?}"
+    );
 }
