@@ -86,6 +86,11 @@ pub enum NpeCommand {
         /// their samples too.
         #[arg(long, value_delimiter = ',')]
         extra_train: Vec<PathBuf>,
+        /// Threads that share each batch: its samples are split between them and their
+        /// gradients summed, so the step is the whole batch's up to rounding (1 repeats a
+        /// single-thread run bit for bit; runs with the same count repeat each other).
+        #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=64))]
+        threads: u32,
         /// Leave the contact points out (the ablation without geometry).
         #[arg(long)]
         no_geometry: bool,
@@ -253,6 +258,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             init_from,
             symmetries,
             extra_train,
+            threads,
             no_geometry,
             no_force,
             json,
@@ -287,6 +293,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
                 init_from,
                 symmetries,
                 train_only,
+                threads: threads as usize,
                 test_setups,
                 val_setups,
                 progress: !json,

@@ -4,7 +4,7 @@
 use std::time::Instant;
 
 use burn::grad_clipping::GradientClippingConfig;
-use burn::module::Module;
+use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Tensor};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -99,7 +99,7 @@ pub struct TrainReport<M> {
 pub fn train<M, F>(model: M, n_samples: usize, cfg: &TrainConfig, loss: F) -> Result<TrainReport<M>>
 where
     M: Module,
-    F: Fn(&M, &[usize], &Device) -> Tensor<1>,
+    F: Fn(&M, &[usize], &Device) -> Tensor<1> + Sync,
 {
     let split = Split::random(n_samples, cfg.val_fraction, cfg.seed);
     train_split(model, &split, cfg, loss)
@@ -114,7 +114,27 @@ pub fn train_split<M, F>(
 ) -> Result<TrainReport<M>>
 where
     M: Module,
-    F: Fn(&M, &[usize], &Device) -> Tensor<1>,
+    F: Fn(&M, &[usize], &Device) -> Tensor<1> + Sync,
+{
+    train_split_sharded(model, split, cfg, 1, loss)
+}
+
+/// [`train_split`] with every batch cut into `shards` contiguous parts whose losses and
+/// gradients are computed on as many threads, then combined in a fixed order, each part
+/// weighted by its share of the batch. Since `loss` is a mean over samples, the step is the
+/// whole batch's up to rounding, and the same for any run with the same `shards`; 1 is
+/// [`train_split`] bit for bit. Only for networks whose samples do not interact: batch norm
+/// would normalise over each part, and its running statistics are shared between the forks.
+pub fn train_split_sharded<M, F>(
+    model: M,
+    split: &Split,
+    cfg: &TrainConfig,
+    shards: usize,
+    loss: F,
+) -> Result<TrainReport<M>>
+where
+    M: Module,
+    F: Fn(&M, &[usize], &Device) -> Tensor<1> + Sync,
 {
     let device = autodiff_device(&model)?;
     let plain = device.clone().inner();
@@ -122,17 +142,7 @@ where
         model,
         split,
         cfg,
-        |model, batch| {
-            let l = loss(model, batch, &device);
-            let value = f64::from(l.clone().detach().into_scalar::<f32>());
-            // A diverged loss has no gradients worth taking; the loop stops on its value.
-            let grads = if value.is_finite() {
-                GradientsParams::from_grads(l.backward(), model)
-            } else {
-                GradientsParams::new()
-            };
-            Ok((value, grads))
-        },
+        |model, batch| batch_gradients(model, batch, shards, &device, &loss),
         |valid, samples| {
             Ok(evaluate(
                 valid,
@@ -143,6 +153,109 @@ where
             ))
         },
     )
+}
+
+/// The mean loss over `batch` and its gradients by parameter, computed on `shards` threads
+/// (see [`train_split_sharded`]); a non-finite loss comes with no gradients.
+pub fn batch_gradients<M, F>(
+    model: &M,
+    batch: &[usize],
+    shards: usize,
+    device: &Device,
+    loss: &F,
+) -> Result<(f64, GradientsParams)>
+where
+    M: Module,
+    F: Fn(&M, &[usize], &Device) -> Tensor<1> + Sync,
+{
+    let part = |model: &M, part: &[usize]| {
+        let l = loss(model, part, device);
+        let value = f64::from(l.clone().detach().into_scalar::<f32>());
+        // A diverged loss has no gradients worth taking; the loop stops on its value.
+        let grads = if value.is_finite() {
+            GradientsParams::from_grads(l.backward(), model)
+        } else {
+            GradientsParams::new()
+        };
+        (value, grads)
+    };
+    let parts = shard(batch, shards);
+    if parts.len() == 1 {
+        return Ok(part(model, batch));
+    }
+    // Each thread takes a fork of the parameters (same ids, new autodiff nodes), so the
+    // parts' graphs share no node and back-propagate independently.
+    let results: Vec<_> = std::thread::scope(|s| {
+        let handles: Vec<_> = parts
+            .iter()
+            .map(|&p| {
+                let replica = model.clone().fork(device);
+                let part = &part;
+                s.spawn(move || part(&replica, p))
+            })
+            .collect();
+        // A panic in `loss` reaches the caller as it would on one thread.
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
+    });
+    let mut value = 0.0;
+    let mut sum = WeightedSum {
+        parts: Vec::with_capacity(parts.len()),
+        weights: Vec::with_capacity(parts.len()),
+        out: GradientsParams::new(),
+    };
+    for ((v, g), p) in results.into_iter().zip(&parts) {
+        let w = p.len() as f64 / batch.len() as f64;
+        value += v * w;
+        sum.parts.push(g);
+        sum.weights.push(w as f32);
+    }
+    if !value.is_finite() {
+        return Ok((value, GradientsParams::new()));
+    }
+    model.visit(&mut sum);
+    Ok((value, sum.out))
+}
+
+/// `batch` cut into at most `shards` contiguous parts whose sizes differ by one at most.
+fn shard(batch: &[usize], shards: usize) -> Vec<&[usize]> {
+    let k = shards.clamp(1, batch.len().max(1));
+    let (q, r) = (batch.len() / k, batch.len() % k);
+    let mut parts = Vec::with_capacity(k);
+    let mut start = 0;
+    for i in 0..k {
+        let len = q + usize::from(i < r);
+        parts.push(&batch[start..start + len]);
+        start += len;
+    }
+    parts
+}
+
+/// Sums the parts' gradients of every parameter, each part scaled by its weight, in part order.
+struct WeightedSum {
+    parts: Vec<GradientsParams>,
+    weights: Vec<f32>,
+    out: GradientsParams,
+}
+
+impl ModuleVisitor for WeightedSum {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        let mut acc: Option<Tensor<D>> = None;
+        for (g, &w) in self.parts.iter_mut().zip(&self.weights) {
+            if let Some(t) = g.remove::<D>(param.id) {
+                let t = t.mul_scalar(w);
+                acc = Some(match acc {
+                    None => t,
+                    Some(a) => a + t,
+                });
+            }
+        }
+        if let Some(a) = acc {
+            self.out.register(param.id, a);
+        }
+    }
 }
 
 /// The device of `model`'s parameters, which must be an autodiff device.

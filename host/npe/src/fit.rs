@@ -6,7 +6,7 @@ use ocm_learn::burn::module::Module;
 use ocm_learn::burn::tensor::activation::log_sigmoid;
 use ocm_learn::burn::tensor::{Device, Tensor, TensorData};
 use ocm_learn::gcn::Graph;
-use ocm_learn::{EpochRecord, Split, TrainConfig, cpu_autodiff, train_split};
+use ocm_learn::{EpochRecord, Split, TrainConfig, cpu_autodiff, train_split_sharded};
 use ocm_tactile::mask::CONTACT_THRESHOLD_M;
 use serde::{Deserialize, Serialize};
 
@@ -70,6 +70,10 @@ pub struct FitOptions {
     /// placements, say): the held-out set-ups stay those of the data without them.
     #[serde(default)]
     pub train_only: Vec<String>,
+    /// Threads that share each batch ([`ocm_learn::train_split_sharded`]; 1: the batch on
+    /// one thread). The step is the same up to rounding, and the same for the same count.
+    #[serde(default = "one")]
+    pub threads: usize,
     /// Show a progress bar.
     pub progress: bool,
 }
@@ -96,9 +100,14 @@ impl Default for FitOptions {
             init_from: None,
             symmetries: Vec::new(),
             train_only: Vec::new(),
+            threads: 1,
             progress: false,
         }
     }
+}
+
+fn one() -> usize {
+    1
 }
 
 /// The outcome of [`fit`].
@@ -294,7 +303,7 @@ pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
         None => cfg.init(&ad, opts.seed)?,
     };
     let t0 = std::time::Instant::now();
-    let report = train_split(
+    let report = train_split_sharded(
         net,
         &idx,
         &TrainConfig {
@@ -307,6 +316,7 @@ pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
             seed: opts.seed,
             progress: opts.progress,
         },
+        opts.threads,
         |m, batch, device| {
             if device.is_autodiff() {
                 loss(m, &cfg, p, batch, &pos_ad, &g_ad, device)

@@ -189,6 +189,35 @@ fn same_seed_same_engine_and_checkpoint_round_trip() {
     std::fs::remove_file(&path).ok();
 }
 
+/// Two threads per batch (`FitOptions::threads`): the same run twice, and the one-thread run
+/// up to rounding, with the contact head and the gap input so every input path is forked.
+#[test]
+fn two_threads_per_batch_train_the_same_engine() {
+    let p = synthetic();
+    let opts = |threads| FitOptions {
+        threads,
+        contact_prior: true,
+        contact_head: true,
+        node_gap: true,
+        ..small_fit(5)
+    };
+    let (one, two, again) = (
+        fit(&p, &opts(1)).unwrap(),
+        fit(&p, &opts(2)).unwrap(),
+        fit(&p, &opts(2)).unwrap(),
+    );
+    let s = &p.samples[0];
+    let run = |n: &Npe| n.predict(&s.points_m, s.force_n[2], s.depth_m).unwrap();
+    assert_eq!(run(&two.npe), run(&again.npe));
+    assert_eq!(one.curve.len(), two.curve.len());
+    for (a, b) in one.curve.iter().zip(&two.curve) {
+        assert_eq!(b.val_loss, again.curve[a.epoch - 1].val_loss);
+        for (x, y) in [(a.train_loss, b.train_loss), (a.val_loss, b.val_loss)] {
+            assert!((x - y).abs() < 1e-4 * x, "epoch {}: {x} vs {y}", a.epoch);
+        }
+    }
+}
+
 /// The plain kernel behind `predict` and `latent` against the burn network it was copied from,
 /// for the engine and both ablations.
 #[test]
