@@ -142,7 +142,7 @@ where
         model,
         split,
         cfg,
-        |model, batch| batch_gradients(model, batch, shards, &device, &loss),
+        |model, batch| Ok(batch_gradients(model, batch, shards, &device, &loss)),
         |valid, samples| {
             Ok(evaluate(
                 valid,
@@ -163,7 +163,7 @@ pub fn batch_gradients<M, F>(
     shards: usize,
     device: &Device,
     loss: &F,
-) -> Result<(f64, GradientsParams)>
+) -> (f64, GradientsParams)
 where
     M: Module,
     F: Fn(&M, &[usize], &Device) -> Tensor<1> + Sync,
@@ -181,7 +181,7 @@ where
     };
     let parts = shard(batch, shards);
     if parts.len() == 1 {
-        return Ok(part(model, batch));
+        return part(model, batch);
     }
     // Each thread takes a fork of the parameters (same ids, new autodiff nodes), so the
     // parts' graphs share no node and back-propagate independently.
@@ -213,10 +213,10 @@ where
         sum.weights.push(w as f32);
     }
     if !value.is_finite() {
-        return Ok((value, GradientsParams::new()));
+        return (value, GradientsParams::new());
     }
     model.visit(&mut sum);
-    Ok((value, sum.out))
+    (value, sum.out)
 }
 
 /// `batch` cut into at most `shards` contiguous parts whose sizes differ by one at most.
