@@ -32,6 +32,15 @@ pub fn non_negative(s: &str) -> Result<f64, String> {
     Ok(v)
 }
 
+/// A number in [0, 1] (a fraction).
+pub fn fraction(s: &str) -> Result<f64, String> {
+    let v = number(s)?;
+    if !(0.0..=1.0).contains(&v) {
+        return Err(format!("must lie between 0 and 1 (got {v})"));
+    }
+    Ok(v)
+}
+
 /// A finite number (an angle, an offset).
 pub fn finite(s: &str) -> Result<f64, String> {
     number(s)

@@ -13,7 +13,7 @@ use ocm_dynamics::{
     ForwardConfig, InverseConfig, Samples, TrainedForward, TrainedInverse, Trajectory,
     continue_forward, train_forward, train_inverse,
 };
-use ocm_learn::{TrainConfig, cpu, write_curve};
+use ocm_learn::{LrSchedule, TrainConfig, cpu, write_curve};
 
 use crate::cmd_learn_args::{BenchArgs, DataArgs, EvalArgs, ModelKind, TrainArgs};
 use crate::plot::{Chart, Series};
@@ -109,6 +109,7 @@ fn run_train(a: TrainArgs) -> Result<()> {
         grad_clip_norm: Some(1.0),
         seed: a.seed,
         progress: !a.json,
+        lr_schedule: LrSchedule::cosine_to(a.lr_final),
     };
     let start = std::time::Instant::now();
     let summary = match a.kind {

@@ -82,6 +82,10 @@ pub struct TrainArgs {
     /// Adam learning rate (default: 5e-4 forward, 1e-3 inverse, as in the dissertation).
     #[arg(long)]
     pub lr: Option<f64>,
+    /// Lower the step size along half a cosine, step by step, from --lr down to this
+    /// fraction of it at the end of the last planned epoch (absent: --lr throughout).
+    #[arg(long, value_parser = crate::arg_check::fraction)]
+    pub lr_final: Option<f64>,
     /// Physics weight lambda of the forward loss.
     #[arg(long, default_value_t = DEFAULT_LAMBDA)]
     pub lambda: f64,

@@ -11,7 +11,7 @@ use ocm_dynamics::mapping::{
 };
 use ocm_dynamics::pressure_match::{self, PressureMatchConfig, PressurePair};
 use ocm_fem::bellows::{Bellows, BellowsConfig};
-use ocm_learn::{TrainConfig, write_curve};
+use ocm_learn::{LrSchedule, TrainConfig, write_curve};
 use ocm_mor::rom::ReducedModel;
 use ocm_mor::store::{self, ReducedProbe};
 use ocm_mor::xs::XsProbe;
@@ -225,6 +225,7 @@ pub fn train(a: &TrainArgs) -> Result<()> {
     cfg.batch_size = a.batch_size.unwrap_or(cfg.batch_size);
     cfg.learning_rate = a.lr.unwrap_or(cfg.learning_rate);
     cfg.patience = a.patience.unwrap_or(cfg.patience);
+    cfg.lr_schedule = LrSchedule::cosine_to(a.lr_final);
     let start = std::time::Instant::now();
     let pairs = PosturePairs::from_matches(&d.samples.samples, &d.train)?;
     let (mlp, c1, c2) = SurrogateMlp::train(&pairs, &cfg, a.seed)?;

@@ -2,6 +2,7 @@
 
 use crate::plot::{Chart, Series};
 use anyhow::Context;
+use ocm_learn::LrSchedule;
 use ocm_npe::data::{Prepared, SetupSplit};
 use ocm_npe::eval::{Extra, SampleScore, Scores, evaluate_with, fit_stiffness};
 use ocm_npe::fit::{FitOptions, fit};
@@ -32,6 +33,10 @@ pub enum NpeCommand {
         /// Adam step size.
         #[arg(long, default_value_t = 2e-3)]
         lr: f64,
+        /// Lower the step size along half a cosine, step by step, from --lr down to this
+        /// fraction of it at the end of the last planned epoch (absent: --lr throughout).
+        #[arg(long, value_parser = crate::arg_check::fraction)]
+        lr_final: Option<f64>,
         /// Early-stopping patience, epochs.
         #[arg(long, default_value_t = 10)]
         patience: usize,
@@ -244,6 +249,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             epochs,
             batch,
             lr,
+            lr_final,
             patience,
             width,
             layers,
@@ -294,6 +300,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
                 symmetries,
                 train_only,
                 threads: threads as usize,
+                lr_schedule: LrSchedule::cosine_to(lr_final),
                 test_setups,
                 val_setups,
                 progress: !json,

@@ -2,7 +2,7 @@
 //! rendering networks on pairs from the tactile FEM data set and the physically based renderer.
 
 use anyhow::Context;
-use ocm_learn::{Split, TrainConfig, cpu, cpu_autodiff};
+use ocm_learn::{LrSchedule, Split, TrainConfig, cpu, cpu_autodiff};
 use ocm_tactile::dataset::{Dataset, TopSurface};
 use ocm_tactile::gel::{Gel, GelMaterial};
 use ocm_tactile::mask::Grid;
@@ -292,6 +292,7 @@ pub fn train(a: TrainNetArgs) -> anyhow::Result<()> {
         grad_clip_norm: Some(1.0),
         seed: a.seed,
         progress: !a.json,
+        lr_schedule: LrSchedule::Constant,
     };
     let t1 = std::time::Instant::now();
     let report = nets::train_with(&data, net, &split, &tc, None, a.engine)?;

@@ -127,6 +127,12 @@ fn zero_counts_and_non_finite_numbers_are_refused_naming_the_flag() {
         "--lambda-total",
         "must be 0 or more",
     );
+    for args in [
+        &["npe", "train", "--lr-final", "1.5"][..],
+        &["learn", "train", "--lr-final=-0.1"],
+    ] {
+        refused_flag(args, "--lr-final", "must lie between 0 and 1");
+    }
 }
 
 #[test]

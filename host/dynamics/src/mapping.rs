@@ -13,8 +13,8 @@ use std::path::Path;
 
 use ocm_learn::burn::tensor::Device;
 use ocm_learn::{
-    Checkpoint, CheckpointInfo, EpochRecord, Mlp, MlpConfig, Standardizer, TrainConfig, cpu,
-    cpu_autodiff, gather_rows, save_checkpoint, tensor2, train, values,
+    Checkpoint, CheckpointInfo, EpochRecord, LrSchedule, Mlp, MlpConfig, Standardizer, TrainConfig,
+    cpu, cpu_autodiff, gather_rows, save_checkpoint, tensor2, train, values,
 };
 use ocm_surrogate::chain::{N_JOINTS, Posture};
 use ocm_surrogate::fem_samples::FemSample;
@@ -78,6 +78,7 @@ pub fn dissertation_train_config(seed: u64) -> TrainConfig {
         grad_clip_norm: None,
         seed,
         progress: false,
+        lr_schedule: LrSchedule::Constant,
     }
 }
 

@@ -12,7 +12,7 @@ use ocm_dynamics::{
     Trajectory, continue_forward, train_forward, train_inverse,
 };
 use ocm_learn::burn::tensor::{Tensor, TensorData};
-use ocm_learn::{TrainConfig, cpu, cpu_autodiff, tensor2, values};
+use ocm_learn::{LrSchedule, TrainConfig, cpu, cpu_autodiff, tensor2, values};
 
 fn rel_rms(model: &LumpedModel, trajs: &[Trajectory]) -> f64 {
     let (r, a) = model.residual_rms(trajs);
@@ -170,6 +170,7 @@ fn quick(epochs: usize, seed: u64) -> TrainConfig {
         grad_clip_norm: Some(1.0),
         seed,
         progress: false,
+        lr_schedule: LrSchedule::Constant,
     }
 }
 

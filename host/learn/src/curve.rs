@@ -17,21 +17,35 @@ pub struct EpochRecord {
     pub train_loss: f64,
     /// Validation loss after the epoch (NaN when there is no validation set).
     pub val_loss: f64,
+    /// Step size of the epoch's last optimiser step (NaN in curves written before it was kept).
+    #[serde(default = "not_recorded")]
+    pub learning_rate: f64,
     /// Wall time since the start of training, in seconds.
     pub elapsed_s: f64,
+}
+
+fn not_recorded() -> f64 {
+    f64::NAN
 }
 
 /// Writes the curve as CSV with a header line.
 pub fn write_csv(path: &Path, curve: &[EpochRecord]) -> Result<()> {
     let io = |e: std::io::Error| LearnError::io(path, e);
     let mut w = csv::Writer::from_path(path).map_err(|e| LearnError::io(path, e.into()))?;
-    w.write_record(["epoch", "train_loss", "val_loss", "elapsed_s"])
-        .map_err(|e| io(e.into()))?;
+    w.write_record([
+        "epoch",
+        "train_loss",
+        "val_loss",
+        "learning_rate",
+        "elapsed_s",
+    ])
+    .map_err(|e| io(e.into()))?;
     for r in curve {
         w.write_record([
             r.epoch.to_string(),
             format!("{:.8e}", r.train_loss),
             format!("{:.8e}", r.val_loss),
+            format!("{:.6e}", r.learning_rate),
             format!("{:.3}", r.elapsed_s),
         ])
         .map_err(|e| io(e.into()))?;

@@ -31,8 +31,8 @@ pub use mlp::{Activation, Mlp, MlpConfig};
 pub use scaling::Standardizer;
 pub use sequence::{SequenceEncoder, SequenceEncoderConfig};
 pub use train::{
-    Split, TrainConfig, TrainReport, batch_gradients, train, train_split, train_split_sharded,
-    train_split_steps,
+    LrSchedule, Split, TrainConfig, TrainReport, batch_gradients, train, train_split,
+    train_split_sharded, train_split_steps,
 };
 pub use unet::{UNet, UNetConfig, UNetNorm};
 

@@ -36,6 +36,57 @@ pub struct TrainConfig {
     pub seed: u64,
     /// Show a progress bar on stderr.
     pub progress: bool,
+    /// How the step size changes over the run (older files without it: constant).
+    #[serde(default)]
+    pub lr_schedule: LrSchedule,
+}
+
+/// How the Adam step size changes over a run, step by step.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum LrSchedule {
+    /// `learning_rate` at every step.
+    #[default]
+    Constant,
+    /// Half a cosine from `learning_rate` at the first step down to `final_fraction` of it
+    /// after the last step of the planned `epochs` (early stopping cuts the tail off).
+    Cosine {
+        /// The fraction of `learning_rate` the run ends at, in [0, 1].
+        final_fraction: f64,
+    },
+}
+
+impl LrSchedule {
+    /// A cosine down to `final_fraction` where one is given, else the constant step (a
+    /// command line's optional flag).
+    pub fn cosine_to(final_fraction: Option<f64>) -> Self {
+        final_fraction.map_or(Self::Constant, |final_fraction| Self::Cosine {
+            final_fraction,
+        })
+    }
+
+    /// The step size of optimiser step `step` (from 0) of `total`, for a base rate `base`.
+    pub fn rate(&self, base: f64, step: usize, total: usize) -> f64 {
+        match *self {
+            Self::Constant => base,
+            Self::Cosine { final_fraction } => {
+                let t = (step as f64 / total.max(1) as f64).min(1.0);
+                let cos = 0.5 * (1.0 + (std::f64::consts::PI * t).cos());
+                base * (final_fraction + (1.0 - final_fraction) * cos)
+            }
+        }
+    }
+
+    /// Checks the schedule's parameters.
+    pub fn validate(&self) -> Result<()> {
+        match *self {
+            Self::Constant => Ok(()),
+            Self::Cosine { final_fraction } if (0.0..=1.0).contains(&final_fraction) => Ok(()),
+            Self::Cosine { final_fraction } => Err(LearnError::Config(format!(
+                "the cosine schedule's final fraction {final_fraction} must lie in [0, 1]"
+            ))),
+        }
+    }
 }
 
 impl Default for TrainConfig {
@@ -49,6 +100,7 @@ impl Default for TrainConfig {
             grad_clip_norm: None,
             seed: 0,
             progress: false,
+            lr_schedule: LrSchedule::Constant,
         }
     }
 }
@@ -301,6 +353,7 @@ where
             cfg.learning_rate
         )));
     }
+    cfg.lr_schedule.validate()?;
     if split.train.is_empty() {
         return Err(LearnError::Data("no training samples".into()));
     }
@@ -320,6 +373,9 @@ where
     let mut best: Option<(f64, usize, M)> = None;
     let mut since_best = 0;
     let mut stopped_early = false;
+    let total_steps = cfg.epochs * order.len().div_ceil(cfg.batch_size);
+    let mut steps = 0;
+    let mut rate = cfg.learning_rate;
     for epoch in 1..=cfg.epochs {
         order.shuffle(&mut rng);
         let mut sum = 0.0;
@@ -330,7 +386,9 @@ where
                 return Err(LearnError::Diverged { epoch, loss: value });
             }
             sum += value * batch.len() as f64;
-            model = optim.step(cfg.learning_rate, model, grads);
+            rate = cfg.lr_schedule.rate(cfg.learning_rate, steps, total_steps);
+            model = optim.step(rate, model, grads);
+            steps += 1;
         }
         let train_loss = sum / order.len() as f64;
         let valid = model.valid();
@@ -343,6 +401,7 @@ where
             epoch,
             train_loss,
             val_loss,
+            learning_rate: rate,
             elapsed_s: start.elapsed().as_secs_f64(),
         });
         bar.set_message(format!("train {train_loss:.3e} val {val_loss:.3e}"));

@@ -4,9 +4,9 @@ use ocm_learn::burn::module::Module;
 use ocm_learn::burn::tensor::{Device, Tensor, TensorData};
 use ocm_learn::checkpoint::param_shapes;
 use ocm_learn::{
-    Checkpoint, CheckpointInfo, LearnError, Mlp, MlpConfig, SequenceEncoderConfig, Split,
-    Standardizer, TrainConfig, batch_gradients, cpu, cpu_autodiff, gather_rows, save_checkpoint,
-    train, train_split_sharded, values,
+    Checkpoint, CheckpointInfo, LearnError, LrSchedule, Mlp, MlpConfig, SequenceEncoderConfig,
+    Split, Standardizer, TrainConfig, batch_gradients, cpu, cpu_autodiff, gather_rows,
+    save_checkpoint, train, train_split_sharded, values,
 };
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -54,6 +54,7 @@ fn small_cfg(epochs: usize) -> TrainConfig {
         grad_clip_norm: None,
         seed: 11,
         progress: false,
+        lr_schedule: LrSchedule::Constant,
     }
 }
 
@@ -81,6 +82,90 @@ fn training_cuts_the_loss_and_cannot_fit_shuffled_targets() {
         "shuffled targets: validation loss {before_s:.3} -> {:.3}",
         report_s.best_loss
     );
+}
+
+#[test]
+fn cosine_schedule_runs_from_the_rate_to_its_final_fraction() {
+    let (base, total) = (2e-3, 1000);
+    let cosine = LrSchedule::Cosine {
+        final_fraction: 0.1,
+    };
+    let close = |a: f64, b: f64| assert!((a - b).abs() <= 1e-12 * b, "{a} vs {b}");
+    assert_eq!(cosine.rate(base, 0, total), base);
+    // Half a cosine: 1/2 (1 + cos(pi t)) is 0.8536 at a quarter, 1/2 at half, 0 at the end.
+    close(
+        cosine.rate(base, 250, total),
+        base * (0.1 + 0.9 * 0.853_553_390_593_273_8),
+    );
+    close(cosine.rate(base, 500, total), base * 0.55);
+    close(cosine.rate(base, total, total), base * 0.1);
+    close(cosine.rate(base, 2 * total, total), base * 0.1);
+    let rates: Vec<f64> = (0..=total).map(|k| cosine.rate(base, k, total)).collect();
+    assert!(rates.windows(2).all(|w| w[1] <= w[0]), "never rises");
+    assert_eq!(LrSchedule::Constant.rate(base, 700, total), base);
+    assert_eq!(LrSchedule::cosine_to(Some(0.1)), cosine);
+    assert_eq!(LrSchedule::cosine_to(None), LrSchedule::Constant);
+    assert!(cosine.validate().is_ok());
+    for bad in [-0.1, 1.5, f64::NAN] {
+        let r = LrSchedule::Cosine {
+            final_fraction: bad,
+        }
+        .validate();
+        assert!(matches!(r, Err(LearnError::Config(_))), "{bad}: {r:?}");
+    }
+    // A configuration saved before the schedule existed reads as a constant step.
+    let mut old = serde_json::to_value(small_cfg(3)).unwrap();
+    old.as_object_mut().unwrap().remove("lr_schedule");
+    let read: TrainConfig = serde_json::from_value(old).unwrap();
+    assert_eq!(read.lr_schedule, LrSchedule::Constant);
+    let cfg = TrainConfig {
+        lr_schedule: cosine,
+        ..small_cfg(3)
+    };
+    let back: TrainConfig = serde_json::from_str(&serde_json::to_string(&cfg).unwrap()).unwrap();
+    assert_eq!(back, cfg);
+}
+
+#[test]
+fn the_loop_steps_along_the_schedule() {
+    let (x, y) = regression(9);
+    let schedule = LrSchedule::Cosine {
+        final_fraction: 0.1,
+    };
+    let run = |lr_schedule| {
+        let cfg = TrainConfig {
+            lr_schedule,
+            ..small_cfg(5)
+        };
+        fit(&x, &y, &cfg, 4).1
+    };
+    let constant = run(LrSchedule::Constant);
+    let cosine = run(schedule);
+    // 384 training samples in batches of 32: 12 steps an epoch, 60 in all.
+    for r in &cosine.curve {
+        assert_eq!(r.learning_rate, schedule.rate(3e-3, 12 * r.epoch - 1, 60));
+    }
+    assert!(cosine.curve[4].learning_rate < 0.11 * 3e-3);
+    assert!(constant.curve.iter().all(|r| r.learning_rate == 3e-3));
+    assert_ne!(weights(&cosine.model), weights(&constant.model));
+    // Decaying to the full rate is the constant step, bit for bit.
+    let flat = run(LrSchedule::Cosine {
+        final_fraction: 1.0,
+    });
+    assert_eq!(weights(&flat.model), weights(&constant.model));
+    let bad = TrainConfig {
+        lr_schedule: LrSchedule::Cosine {
+            final_fraction: 2.0,
+        },
+        ..small_cfg(1)
+    };
+    let r = train(
+        MlpConfig::relu(2, &[8], 1).init(&cpu_autodiff(), 2),
+        y.len(),
+        &bad,
+        |m, b, d| mse(m, &x, &y, b, d),
+    );
+    assert!(matches!(r, Err(LearnError::Config(_))), "{r:?}");
 }
 
 #[test]
@@ -507,7 +592,10 @@ fn loss_curve_is_written_as_csv_and_png() {
     ocm_learn::write_curve(&dir, "loss", "test", &report.curve).unwrap();
     let csv = std::fs::read_to_string(dir.join("loss.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
-    assert_eq!(lines[0], "epoch,train_loss,val_loss,elapsed_s");
+    assert_eq!(
+        lines[0],
+        "epoch,train_loss,val_loss,learning_rate,elapsed_s"
+    );
     assert_eq!(lines.len(), 5);
     let png = std::fs::read(dir.join("loss.png")).unwrap();
     assert_eq!(&png[1..4], b"PNG");

@@ -6,7 +6,7 @@ use ocm_learn::burn::module::Module;
 use ocm_learn::burn::tensor::activation::log_sigmoid;
 use ocm_learn::burn::tensor::{Device, Tensor, TensorData};
 use ocm_learn::gcn::Graph;
-use ocm_learn::{EpochRecord, Split, TrainConfig, cpu_autodiff, train_split_sharded};
+use ocm_learn::{EpochRecord, LrSchedule, Split, TrainConfig, cpu_autodiff, train_split_sharded};
 use ocm_tactile::mask::CONTACT_THRESHOLD_M;
 use serde::{Deserialize, Serialize};
 
@@ -74,6 +74,9 @@ pub struct FitOptions {
     /// one thread). The step is the same up to rounding, and the same for the same count.
     #[serde(default = "one")]
     pub threads: usize,
+    /// How the step size changes over the run (older `train.json` files: constant).
+    #[serde(default)]
+    pub lr_schedule: LrSchedule,
     /// Show a progress bar.
     pub progress: bool,
 }
@@ -101,6 +104,7 @@ impl Default for FitOptions {
             symmetries: Vec::new(),
             train_only: Vec::new(),
             threads: 1,
+            lr_schedule: LrSchedule::Constant,
             progress: false,
         }
     }
@@ -315,6 +319,7 @@ pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
             grad_clip_norm: Some(10.0),
             seed: opts.seed,
             progress: opts.progress,
+            lr_schedule: opts.lr_schedule,
         },
         opts.threads,
         |m, batch, device| {

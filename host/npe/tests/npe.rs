@@ -1,7 +1,7 @@
 //! The engine's contract: order of the contact points, bad inputs, a checkpoint round trip,
 //! seeded determinism, and accuracy against the FEM on held-out indentations.
 
-use ocm_learn::cpu;
+use ocm_learn::{LrSchedule, cpu};
 use ocm_npe::data::{Prepared, Sample};
 use ocm_npe::fit::{FitOptions, fit, loss};
 use ocm_npe::model::NpeConfig;
@@ -216,6 +216,33 @@ fn two_threads_per_batch_train_the_same_engine() {
             assert!((x - y).abs() < 1e-4 * x, "epoch {}: {x} vs {y}", a.epoch);
         }
     }
+}
+
+/// `FitOptions::lr_schedule` reaches the loop: the cosine run's last epoch ends near its final
+/// fraction of the step, and its engine is another than the constant step's.
+#[test]
+fn the_cosine_schedule_reaches_the_training_loop() {
+    let p = synthetic();
+    let constant = fit(&p, &small_fit(5)).unwrap();
+    let cosine = fit(
+        &p,
+        &FitOptions {
+            lr_schedule: LrSchedule::Cosine {
+                final_fraction: 0.05,
+            },
+            ..small_fit(5)
+        },
+    )
+    .unwrap();
+    let base = FitOptions::default().learning_rate;
+    assert!(constant.curve.iter().all(|r| r.learning_rate == base));
+    let rates: Vec<f64> = cosine.curve.iter().map(|r| r.learning_rate).collect();
+    assert!(rates.windows(2).all(|w| w[1] < w[0]), "{rates:?}");
+    let last = rates[rates.len() - 1];
+    assert!(last < 0.1 * base, "{rates:?}");
+    let s = &p.samples[0];
+    let run = |n: &Npe| n.predict(&s.points_m, s.force_n[2], s.depth_m).unwrap();
+    assert_ne!(run(&constant.npe), run(&cosine.npe));
 }
 
 /// The plain kernel behind `predict` and `latent` against the burn network it was copied from,

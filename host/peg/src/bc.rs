@@ -7,8 +7,8 @@ use std::path::Path;
 
 use ocm_learn::burn::tensor::Tensor;
 use ocm_learn::{
-    Checkpoint, CheckpointInfo, EpochRecord, Mlp, MlpConfig, Standardizer, TrainConfig, cpu,
-    cpu_autodiff, gather_rows, save_checkpoint, tensor2, train, values,
+    Checkpoint, CheckpointInfo, EpochRecord, LrSchedule, Mlp, MlpConfig, Standardizer, TrainConfig,
+    cpu, cpu_autodiff, gather_rows, save_checkpoint, tensor2, train, values,
 };
 use serde::{Deserialize, Serialize};
 
@@ -43,6 +43,7 @@ impl Default for BcConfig {
                 grad_clip_norm: None,
                 seed: 0,
                 progress: false,
+                lr_schedule: LrSchedule::Constant,
             },
             weight_seed: 0,
         }

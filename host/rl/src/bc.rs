@@ -7,7 +7,7 @@ use crate::error::{Result, RlError};
 use crate::policy::{Policy, policy_config};
 use crate::robot::Robot;
 use ocm_learn::burn::tensor::Tensor;
-use ocm_learn::{EpochRecord, TrainConfig};
+use ocm_learn::{EpochRecord, LrSchedule, TrainConfig};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -68,6 +68,7 @@ impl Default for BcConfig {
                 grad_clip_norm: None,
                 seed: 0,
                 progress: false,
+                lr_schedule: LrSchedule::Constant,
             },
             seed: 0,
             threads: 2,

@@ -2,7 +2,7 @@
 //! run cuts the held-out loss well below predicting the mean, and does not with shuffled
 //! targets; checkpoints round-trip; images of the wrong size are refused.
 
-use ocm_learn::{Split, TrainConfig, UNetConfig, UNetNorm, cpu, cpu_autodiff};
+use ocm_learn::{LrSchedule, Split, TrainConfig, UNetConfig, UNetNorm, cpu, cpu_autodiff};
 use ocm_tactile::nets::pairs::Pairs;
 use ocm_tactile::nets::{self, Engine, NetConfig, NetData, NetKind};
 use ocm_tactile::optics::RgbImage;
@@ -634,5 +634,6 @@ fn smoke_config(epochs: usize, batch_size: usize) -> TrainConfig {
         grad_clip_norm: None,
         seed: 5,
         progress: false,
+        lr_schedule: LrSchedule::Constant,
     }
 }

@@ -1,6 +1,6 @@
 //! The robot and the short training settings the tests share.
 
-use ocm_learn::TrainConfig;
+use ocm_learn::{LrSchedule, TrainConfig};
 use ocm_rl::env::PHYSICS_DT_S;
 use ocm_rl::robot::Robot;
 use ocm_surrogate::chain::ChainGeometry;
@@ -36,5 +36,6 @@ pub fn quick_train() -> TrainConfig {
         grad_clip_norm: None,
         seed: 0,
         progress: false,
+        lr_schedule: LrSchedule::Constant,
     }
 }
