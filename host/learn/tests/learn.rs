@@ -153,19 +153,6 @@ fn the_loop_steps_along_the_schedule() {
         final_fraction: 1.0,
     });
     assert_eq!(weights(&flat.model), weights(&constant.model));
-    let bad = TrainConfig {
-        lr_schedule: LrSchedule::Cosine {
-            final_fraction: 2.0,
-        },
-        ..small_cfg(1)
-    };
-    let r = train(
-        MlpConfig::relu(2, &[8], 1).init(&cpu_autodiff(), 2),
-        y.len(),
-        &bad,
-        |m, b, d| mse(m, &x, &y, b, d),
-    );
-    assert!(matches!(r, Err(LearnError::Config(_))), "{r:?}");
 }
 
 #[test]
@@ -614,13 +601,21 @@ fn training_refuses_bad_settings() {
         batch_size: 0,
         ..small_cfg(1)
     };
-    let r = train(
-        MlpConfig::relu(2, &[8], 1).init(&cpu_autodiff(), 2),
-        y.len(),
-        &zero_batch,
-        |m, b, d| mse(m, &x, &y, b, d),
-    );
-    assert!(matches!(r, Err(LearnError::Config(_))));
+    let bad_fraction = TrainConfig {
+        lr_schedule: LrSchedule::Cosine {
+            final_fraction: 2.0,
+        },
+        ..small_cfg(1)
+    };
+    for (name, cfg) in [("batch of 0", zero_batch), ("cosine to 2", bad_fraction)] {
+        let r = train(
+            MlpConfig::relu(2, &[8], 1).init(&cpu_autodiff(), 2),
+            y.len(),
+            &cfg,
+            |m, b, d| mse(m, &x, &y, b, d),
+        );
+        assert!(matches!(r, Err(LearnError::Config(_))), "{name}: {r:?}");
+    }
     let huge = TrainConfig {
         learning_rate: 1e9,
         ..small_cfg(5)
