@@ -4,7 +4,8 @@
 # plots and CSV tables. Output goes to ./out (or $1).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh
+# The demo needs no Python binding (only the tests do).
+bash scripts/setup.sh --no-binding
 out="${1:-out}"
 mkdir -p "$out"
 cargo build --release -q -p ocm-cli

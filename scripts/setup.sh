@@ -1,10 +1,22 @@
 #!/usr/bin/env bash
 # Installs what the ocm build and tests need on a fresh machine:
-# the Cortex-M4F Rust target, clippy/rustfmt, QEMU for the emulated MCU, and a Python
-# virtual environment (.venv) with the packages the interop tests check against.
+# the Cortex-M4F Rust target, clippy/rustfmt, QEMU for the emulated MCU, a Python
+# virtual environment (.venv) with the packages the interop tests check against, and the
+# Python binding of ocm-rl built into it (skipped with --no-binding).
 # Idempotent and quiet when everything is already there.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+binding=1
+for arg in "$@"; do
+    case "$arg" in
+    --no-binding) binding=0 ;;
+    *)
+        echo "setup: unknown argument '$arg' (accepted: --no-binding)" >&2
+        exit 2
+        ;;
+    esac
+done
 
 if ! command -v cargo >/dev/null 2>&1; then
     echo "setup: cargo not found; install Rust (rustup) first" >&2
@@ -51,8 +63,12 @@ if [ ! -x .venv/bin/python3 ] || ! cmp -s scripts/requirements-test.txt .venv/re
 fi
 
 # The Python binding of ocm-rl (Gymnasium environments, host/rl/py), built by maturin in the dev
-# profile into .venv. It shares target/ with the workspace, so when nothing changed this is a
-# no-op build and a reinstall of the same wheel; its output only shows when it fails.
+# profile into .venv. It shares target/ with the workspace, so after a workspace build it
+# compiles only itself (scripts/test.sh builds the workspace first for that reason) and when
+# nothing changed it is a reinstall of the same wheel; its output only shows when it fails.
+if [ "$binding" = 0 ]; then
+    exit 0
+fi
 rl_log=$(mktemp)
 if ! VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" \
     .venv/bin/maturin develop --quiet -m host/rl/py/Cargo.toml >"$rl_log" 2>&1; then
