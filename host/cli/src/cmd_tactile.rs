@@ -177,7 +177,15 @@ pub enum TactileCommand {
         /// the map fit then keeps it and fits only the rotation, shift and mirror.
         #[arg(long, value_parser = crate::arg_check::positive)]
         mm_per_px: Option<f64>,
-        /// Reuse the map, step offset, mask threshold, tilt and crown of an earlier run (its map.json)
+        /// Candidate FEM steps (10 um) per real frame, comma-separated: real frame k is paired
+        /// with step round((k - offset) x this). The real frames are samples evenly spaced in
+        /// time over a video, not taken at the steps; above 1 the indenter moved more than 10 um
+        /// between them (give --steps enough FEM steps to reach the last frame). Each is fitted
+        /// on the even frames with every tilt, crown and threshold (default 1; with --fit, the
+        /// one in its map.json).
+        #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::positive)]
+        steps_per_frame: Option<Vec<f64>>,
+        /// Reuse the map, step offset and rate, mask threshold, tilt and crown of an earlier run (its map.json)
         /// instead of fitting them (the slow part); the optics are fitted anew.
         #[arg(long)]
         fit: Option<PathBuf>,
@@ -472,6 +480,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             crown_radius_mm,
             crown_apex,
             mm_per_px,
+            steps_per_frame,
             fit,
             optics,
             out,
@@ -488,6 +497,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             crown_radius_mm,
             crown_apex,
             mm_per_px,
+            steps_per_frame,
             fit,
             optics,
             out,
@@ -854,6 +864,7 @@ struct CompareArgs {
     crown_radius_mm: Option<Vec<f64>>,
     crown_apex: Option<CrownApex>,
     mm_per_px: Option<f64>,
+    steps_per_frame: Option<Vec<f64>>,
     fit: Option<PathBuf>,
     optics: OpticsArg,
     out: PathBuf,
@@ -1053,13 +1064,19 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     use ocm_tactile::real::{self, CompareOptions, MaskOptions};
     let t_start = std::time::Instant::now();
     // The candidates: as given, else from --fit's map.json, else the defaults.
-    let given = [&a.threshold, &a.pitch_deg, &a.roll_deg, &a.crown_radius_mm]
-        .iter()
-        .map(|v| v.as_ref().map_or(1, Vec::len))
-        .product::<usize>();
+    let given = [
+        &a.threshold,
+        &a.pitch_deg,
+        &a.roll_deg,
+        &a.crown_radius_mm,
+        &a.steps_per_frame,
+    ]
+    .iter()
+    .map(|v| v.as_ref().map_or(1, Vec::len))
+    .product::<usize>();
     if a.fit.is_some() && given > 1 {
         bail!(
-            "--fit reuses a fitted map: give the tilt, crown and threshold it was fitted with as one --pitch-deg, --roll-deg, --crown-radius-mm and --threshold, or none (got {given} candidates)"
+            "--fit reuses a fitted map: give the tilt, crown, threshold and steps per frame it was fitted with as one --pitch-deg, --roll-deg, --crown-radius-mm, --threshold and --steps-per-frame, or none (got {given} candidates)"
         );
     }
     let saved = a.fit.as_deref().map(read_map_json).transpose()?;
@@ -1083,6 +1100,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         &DEFAULT_THRESHOLDS,
         real::MaskOptions::default().threshold,
     );
+    let rates = or_saved(&a.steps_per_frame, "/steps_per_frame", &[1.0], 1.0);
     let tilts: Vec<[f64; 2]> = or_saved(&a.pitch_deg, "/tilt_deg/pitch", &[0.0], 0.0)
         .into_iter()
         .flat_map(|p| {
@@ -1130,7 +1148,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         .iter()
         .flat_map(|&t| crowns.iter().map(move |&c| (t, c)))
         .collect();
-    let candidates = shapes.len() * thresholds.len();
+    let candidates = shapes.len() * thresholds.len() * rates.len();
     let digit = ocm_datadir::data_file(a.data.as_deref(), "digit")?;
     let frames = real::load_frames(&digit.join("real-frames-edge6"), "edge6")?;
     let bg = frames[0].clone();
@@ -1143,7 +1161,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     // candidate (tilt and mask threshold), the map and step offset are fitted against each on
     // the even frames and the best fit is kept; the odd frames score only the one kept.
     let mut tried = Vec::new();
-    let mut best: Option<(usize, f64, Gel, Fields, Option<real::MaskFit>)> = None;
+    let mut best: Option<(usize, f64, f64, Gel, Fields, Option<real::MaskFit>)> = None;
     let mut best_iou = f64::NEG_INFINITY;
     let mut fem_seconds = Vec::new();
     for (i, &(tilt, crown)) in shapes.iter().enumerate() {
@@ -1160,7 +1178,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         let (fields, secs) = edge_fem(&a, &gel, &grid, s, tilt, &dir)?;
         fem_seconds.extend(secs);
         if candidates == 1 {
-            best = Some((i, thresholds[0], gel, fields, None));
+            best = Some((i, thresholds[0], rates[0], gel, fields, None));
             break;
         }
         let mut kept = None;
@@ -1170,35 +1188,38 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
                 ..MaskOptions::default()
             };
             let pairs = real::MaskPairs::new(&gel, &fields, &frames, &mask)?;
-            let (lo, hi) = pairs.offsets(CompareOptions::default().offset_window)?;
-            let pb = bar(
-                1,
-                &format!(
-                    "map fit: pitch {} roll {} deg, crown {crown} mm, threshold {threshold}",
-                    tilt[0], tilt[1]
-                ),
-            );
-            let fit = pairs.fit(lo..=hi, a.mm_per_px.map(|v| 1e3 / v))?;
-            pb.finish_and_clear();
-            tried.push(serde_json::json!({
-                "pitch_deg": tilt[0],
-                "roll_deg": tilt[1],
-                "crown_radius_mm": crown,
-                "threshold": threshold,
-                "fem_cache": dir.display().to_string(),
-                "fit_iou": fit.fit_iou,
-                "offset_steps": fit.offset_steps,
-            }));
-            if fit.fit_iou > best_iou {
-                best_iou = fit.fit_iou;
-                kept = Some((threshold, fit));
+            for &rate in &rates {
+                let (lo, hi) = pairs.offsets(CompareOptions::default().offset_window, rate)?;
+                let pb = bar(
+                    1,
+                    &format!(
+                        "map fit: pitch {} roll {} deg, crown {crown} mm, threshold {threshold}, {rate} steps per frame",
+                        tilt[0], tilt[1]
+                    ),
+                );
+                let fit = pairs.fit(lo..=hi, a.mm_per_px.map(|v| 1e3 / v), rate)?;
+                pb.finish_and_clear();
+                tried.push(serde_json::json!({
+                    "pitch_deg": tilt[0],
+                    "roll_deg": tilt[1],
+                    "crown_radius_mm": crown,
+                    "threshold": threshold,
+                    "steps_per_frame": rate,
+                    "fem_cache": dir.display().to_string(),
+                    "fit_iou": fit.fit_iou,
+                    "offset_steps": fit.offset_steps,
+                }));
+                if fit.fit_iou > best_iou {
+                    best_iou = fit.fit_iou;
+                    kept = Some((threshold, rate, fit));
+                }
             }
         }
-        if let Some((threshold, fit)) = kept {
-            best = Some((i, threshold, gel, fields, Some(fit)));
+        if let Some((threshold, rate, fit)) = kept {
+            best = Some((i, threshold, rate, gel, fields, Some(fit)));
         }
     }
-    let Some((chosen, threshold, gel, fields, tilt_fit)) = best else {
+    let Some((chosen, threshold, rate, gel, fields, tilt_fit)) = best else {
         bail!("no tilt candidates");
     };
     let (tilt, crown) = shapes[chosen];
@@ -1215,6 +1236,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
                 .and_then(serde_json::Value::as_u64)
                 .with_context(|| format!("{}: no offset_steps", p.display()))?
                 as usize,
+            steps_per_frame: rate,
             fit_iou: v
                 .get("fit_iou")
                 .and_then(serde_json::Value::as_f64)
@@ -1231,6 +1253,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         // the tilts' map fits stand (each is what a single run would fit)
         fixed_fit: fixed_fit.or(tilt_fit),
         px_per_m: a.mm_per_px.map(|v| 1e3 / v),
+        steps_per_frame: rate,
         ..CompareOptions::default()
     };
     let calib = PolyCalib::from_npz(digit.join(real::DEFAULT_CALIB))?;
@@ -1298,6 +1321,8 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         "map": c.fit.map,
         "map_mm_per_px": 1e3 / c.fit.map.px_per_m,
         "offset_steps": c.fit.offset_steps,
+        "steps_per_frame": c.fit.steps_per_frame,
+        "steps_per_frame_tried": rates,
         "offsets_tried": c.offsets_tried,
         "fit_iou": c.fit.fit_iou,
         "masks": {
@@ -1339,6 +1364,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         serde_json::to_string_pretty(&serde_json::json!({
             "map": c.fit.map,
             "offset_steps": c.fit.offset_steps,
+            "steps_per_frame": c.fit.steps_per_frame,
             "fit_iou": c.fit.fit_iou,
             "threshold": threshold,
             "tilt_deg": {"pitch": tilt[0], "roll": tilt[1]},
@@ -1353,7 +1379,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     )?;
     let plot_iou = Chart {
         title: &format!("FEM vs real masks, {} (odd frames scored)", s.name),
-        x_label: "real frame (10 um steps)",
+        x_label: "real frame",
         y_label: "IoU",
         series: vec![
             Series {
@@ -1378,13 +1404,14 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(
-            "{} on {}: map {:.4} mm/px, angle {:.3} rad, mirror {}, offset {} steps (fit IoU {:.3}); masks on the odd frames: IoU median {:.3} (goal 0.85), centroid {:.3} mm, rotation {:.3} rad; rendered (gain {:.2}): contact-region SSIM median {:.3} (goal 0.93), L1 {:.2}, PSNR {:.1} dB, mask IoU {:.3}; files in {}",
+            "{} on {}: map {:.4} mm/px, angle {:.3} rad, mirror {}, offset {} frames, {} steps per frame (fit IoU {:.3}); masks on the odd frames: IoU median {:.3} (goal 0.85), centroid {:.3} mm, rotation {:.3} rad; rendered (gain {:.2}): contact-region SSIM median {:.3} (goal 0.93), L1 {:.2}, PSNR {:.1} dB, mask IoU {:.3}; files in {}",
             s.name,
             mesh_file(a.mesh),
             1e3 / c.fit.map.px_per_m,
             c.fit.map.angle_rad,
             c.fit.map.mirror,
             c.fit.offset_steps,
+            c.fit.steps_per_frame,
             c.fit.fit_iou,
             median(&ious),
             median(&cens),

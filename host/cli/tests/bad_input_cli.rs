@@ -195,9 +195,18 @@ fn compare_real_candidates_are_checked_before_any_work() {
         "--mm-per-px",
         "must be greater than 0",
     );
+    refused_flag(
+        &["tactile", "compare-real", "--steps-per-frame=1,-1.2"],
+        "--steps-per-frame",
+        "must be greater than 0",
+    );
     // a fitted map belongs to one tilt, crown and threshold; several candidates with it are
     // refused before the frames, the mesh or the FEM are touched
-    for (candidates, n) in [("--roll-deg=-2,0,2", 3), ("--crown-radius-mm=0,20", 2)] {
+    for (candidates, n) in [
+        ("--roll-deg=-2,0,2", 3),
+        ("--crown-radius-mm=0,20", 2),
+        ("--steps-per-frame=1,1.2", 2),
+    ] {
         let e = fails(&[
             "tactile",
             "compare-real",

@@ -203,10 +203,32 @@ pub fn score_masks(real: &Mask, fem: &Mask, px_per_m: f64) -> Result<(f64, f64, 
 pub struct MaskFit {
     /// The gel-to-image map.
     pub map: CameraMap,
-    /// Real frame k is compared with FEM step k - offset (the real sequence starts above the gel).
+    /// Real frame k is compared with FEM step round((k - offset) x `steps_per_frame`): the real
+    /// sequence starts above the gel. In frames; in steps too at one step per frame.
     pub offset_steps: usize,
+    /// FEM steps (10 um) per real frame: 1 when the frames were taken at the steps, more when
+    /// they are samples of a video whose indenter moved farther between them.
+    #[serde(default = "one")]
+    pub steps_per_frame: f64,
     /// Mean IoU on the fitting depths.
     pub fit_iou: f64,
+}
+
+impl MaskFit {
+    /// The FEM step paired with real frame `k` (0 before the first touch).
+    pub fn step_for(&self, k: usize) -> usize {
+        paired_step(k, self.offset_steps, self.steps_per_frame)
+    }
+}
+
+/// FEM step round((k - offset) x steps_per_frame) paired with real frame k; 0 (no contact) at
+/// or before the offset.
+pub fn paired_step(k: usize, offset: usize, steps_per_frame: f64) -> usize {
+    if k <= offset {
+        0
+    } else {
+        ((k - offset) as f64 * steps_per_frame).round() as usize
+    }
 }
 
 /// The camera map and optics `compare-real` fitted, as its `map.json` holds them.
@@ -214,8 +236,11 @@ pub struct MaskFit {
 pub struct OpticsFile {
     /// The gel-to-image map of the real camera.
     pub map: CameraMap,
-    /// Real frame k shows FEM step k - offset.
+    /// Real frame k shows FEM step round((k - offset) x `steps_per_frame`).
     pub offset_steps: usize,
+    /// FEM steps per real frame (1 in maps written before it was fitted).
+    #[serde(default = "one")]
+    pub steps_per_frame: f64,
     /// Gain on the calibrated change.
     #[serde(default = "one")]
     pub gain: f64,
@@ -244,6 +269,11 @@ impl OpticsFile {
                 path.display()
             ))
         })
+    }
+
+    /// The FEM step paired with real frame `k` (0 before the first touch).
+    pub fn step_for(&self, k: usize) -> usize {
+        paired_step(k, self.offset_steps, self.steps_per_frame)
     }
 
     /// Sets `renderer`'s optics (gain, smoothing, colour transform, depth shading) to these.
@@ -411,32 +441,38 @@ fn compass_max(f: &dyn Fn(&[f64]) -> f64, x0: &[f64], step: &[f64], tol: f64) ->
 /// Fits the gel-to-image map (scale, rotation, mirror, shift) and the step offset between the
 /// real sequence and the FEM on the frames `fit` (indices into `real`), maximising the mean
 /// mask IoU. `fem[j]` is the gel-grid mask of FEM step j + 1; real frame k pairs with step
-/// k - offset (an empty mask below 1). `offsets` lists the offsets tried. Every offset, mirror
-/// and half-turn starts from second moments and is searched on every other fitting frame; the
-/// best is refined on all of them. `px_per_m` fixes the scale (pixels per metre of gel) instead
-/// of fitting it.
+/// [`paired_step`]`(k, offset, steps_per_frame)` (an empty mask below 1). `offsets` lists the
+/// offsets tried. Every offset, mirror and half-turn starts from second moments and is
+/// searched on every other fitting frame; the best is refined on all of them. `px_per_m` fixes
+/// the scale (pixels per metre of gel) instead of fitting it. Fitting frames paired past the
+/// FEM's last step are left out.
 pub fn fit_map(
     real: &[Mask],
     fem: &[Mask],
     fit: &[usize],
     offsets: std::ops::RangeInclusive<usize>,
     px_per_m: Option<f64>,
+    steps_per_frame: f64,
 ) -> Result<MaskFit> {
+    if !(steps_per_frame > 0.0) || !steps_per_frame.is_finite() {
+        return Err(TactileError::Input(format!(
+            "FEM steps per real frame must be finite and positive (got {steps_per_frame})"
+        )));
+    }
     use rayon::prelude::*;
     let Some(gel_grid) = fem.first().map(|m| m.grid) else {
         return Err(TactileError::Input("no FEM masks to fit against".into()));
     };
     let empty = mask_from_fn(gel_grid, |_, _| false);
     let pair = |k: usize, o: usize| -> &Mask {
-        if k > o && k - o <= fem.len() {
-            &fem[k - o - 1]
-        } else {
-            &empty
+        match paired_step(k, o, steps_per_frame) {
+            j @ 1.. if j <= fem.len() => &fem[j - 1],
+            _ => &empty,
         }
     };
     let pairs_for = |o: usize, every: usize| -> Vec<(Boxed, Boxed)> {
         fit.iter()
-            .filter(|&&k| k <= o + fem.len())
+            .filter(|&&k| paired_step(k, o, steps_per_frame) <= fem.len())
             .step_by(every)
             .map(|&k| (Boxed::new(&real[k]), Boxed::new(pair(k, o))))
             .collect()
@@ -494,6 +530,7 @@ pub fn fit_map(
     Ok(MaskFit {
         map: make(&x, mirror),
         offset_steps: o,
+        steps_per_frame,
         fit_iou: fx,
     })
 }
@@ -508,7 +545,7 @@ pub fn score_map(
     let mut out = Vec::new();
     let s = fit.map.px_per_m;
     for &k in score {
-        let j = k.saturating_sub(fit.offset_steps);
+        let j = fit.step_for(k);
         if j > fem.len() {
             // Deeper than the FEM ran: nothing to compare.
             continue;
@@ -803,6 +840,8 @@ pub struct CompareOptions {
     pub fixed_fit: Option<MaskFit>,
     /// The map's scale, pixels per metre of gel, when it is known rather than fitted.
     pub px_per_m: Option<f64>,
+    /// FEM steps per real frame in the map fit ([`MaskFit::steps_per_frame`]).
+    pub steps_per_frame: f64,
 }
 
 impl Default for CompareOptions {
@@ -814,6 +853,7 @@ impl Default for CompareOptions {
             optics: OpticsFit::ColourDepth,
             fixed_fit: None,
             px_per_m: None,
+            steps_per_frame: 1.0,
         }
     }
 }
@@ -879,11 +919,10 @@ fn smoothed_heights(
     renderer: &Renderer,
     sampler: &SurfaceSampler,
     fields: &[Vec<[f64; 3]>],
-    offset: usize,
-    k: usize,
+    step: usize,
 ) -> Result<Vec<f32>> {
     let mut h = vec![0.0f32; sampler.rows * sampler.cols];
-    if let Some(u) = fem_field(fields, offset, k) {
+    if let Some(u) = fem_field(fields, step) {
         sampler.heights(u, &mut h)?;
     }
     Ok(crate::optics::render::gaussian_blur(
@@ -894,21 +933,25 @@ fn smoothed_heights(
     ))
 }
 
-/// Real frame k's FEM displacement under `offset` (None before first touch).
-fn fem_field(fields: &[Vec<[f64; 3]>], offset: usize, k: usize) -> Option<&Vec<[f64; 3]>> {
-    let j = k.checked_sub(offset)?;
-    if j >= 1 { fields.get(j - 1) } else { None }
+/// The displacement of FEM step `step` (`fields[step - 1]`; None at step 0, before the touch,
+/// and past the last step).
+fn fem_field(fields: &[Vec<[f64; 3]>], step: usize) -> Option<&Vec<[f64; 3]>> {
+    if step >= 1 {
+        fields.get(step - 1)
+    } else {
+        None
+    }
 }
 
-/// Renders the FEM state paired with real frame `k` (the background before first touch).
+/// Renders FEM step `step` (the background at step 0, before the touch), as paired with a
+/// real frame by [`MaskFit::step_for`].
 pub fn render_paired(
     renderer: &Renderer,
     sampler: &SurfaceSampler,
     fields: &[Vec<[f64; 3]>],
-    offset: usize,
-    k: usize,
+    step: usize,
 ) -> Result<RgbImage> {
-    match fem_field(fields, offset, k) {
+    match fem_field(fields, step) {
         Some(u) => render_step(renderer, sampler, u),
         None => Ok(renderer.background()),
     }
@@ -961,10 +1004,11 @@ impl MaskPairs {
     }
 
     /// The step offsets worth trying: `window` on each side of the first real fitting frame
-    /// with contact minus the FEM's first step with contact. Either counts as in contact from
-    /// [`FIRST_CONTACT_SHARE`] of its largest mask's area: at a low threshold a few pixels of
-    /// noise in a real frame cross it long before the indenter touches.
-    pub fn offsets(&self, window: usize) -> Result<(usize, usize)> {
+    /// with contact minus the frames the FEM's first step with contact takes at
+    /// `steps_per_frame`. Either counts as in contact from [`FIRST_CONTACT_SHARE`] of its
+    /// largest mask's area: at a low threshold a few pixels of noise in a real frame cross it
+    /// long before the indenter touches.
+    pub fn offsets(&self, window: usize, steps_per_frame: f64) -> Result<(usize, usize)> {
         let largest = self
             .fit_frames
             .iter()
@@ -997,7 +1041,7 @@ impl MaskPairs {
                 TactileError::Input("the FEM never reaches the 30 um mask threshold".into())
             })?
             + 1;
-        let centre = k0.saturating_sub(j0);
+        let centre = k0.saturating_sub((j0 as f64 / steps_per_frame.max(1e-3)).round() as usize);
         Ok((centre.saturating_sub(window), centre + window))
     }
 
@@ -1006,8 +1050,16 @@ impl MaskPairs {
         &self,
         offsets: std::ops::RangeInclusive<usize>,
         px_per_m: Option<f64>,
+        steps_per_frame: f64,
     ) -> Result<MaskFit> {
-        fit_map(&self.real, &self.fem, &self.fit_frames, offsets, px_per_m)
+        fit_map(
+            &self.real,
+            &self.fem,
+            &self.fit_frames,
+            offsets,
+            px_per_m,
+            steps_per_frame,
+        )
     }
 
     /// `fit` scored on the scoring frames ([`score_map`]).
@@ -1031,10 +1083,10 @@ pub fn compare(
     let bg = &frames[0];
     progress("fitting the gel-to-image map");
     let pairs = MaskPairs::new(gel, fields, frames, &opts.mask)?;
-    let (lo, hi) = pairs.offsets(opts.offset_window)?;
+    let (lo, hi) = pairs.offsets(opts.offset_window, opts.steps_per_frame)?;
     let fit = match opts.fixed_fit {
         Some(f) => f,
-        None => pairs.fit(lo..=hi, opts.px_per_m)?,
+        None => pairs.fit(lo..=hi, opts.px_per_m, opts.steps_per_frame)?,
     };
     let masks = pairs.score(&fit)?;
     progress("rendering");
@@ -1065,11 +1117,11 @@ pub fn compare(
             let mut pairs = Vec::new();
             let mut triples = Vec::new();
             for &k in &fit_frames {
-                let img = render_paired(renderer, &sampler, fields, fit.offset_steps, k)?;
+                let img = render_paired(renderer, &sampler, fields, fit.step_for(k))?;
                 match model {
                     OpticsFit::Gain => pairs.push((img, &frames[k])),
                     OpticsFit::ColourDepth => {
-                        let h = smoothed_heights(renderer, &sampler, fields, fit.offset_steps, k)?;
+                        let h = smoothed_heights(renderer, &sampler, fields, fit.step_for(k))?;
                         triples.push((img, &frames[k], h));
                     }
                 }
@@ -1086,7 +1138,7 @@ pub fn compare(
             let (mut ssim, mut n) = (0.0, 0usize);
             for &k in &fit_frames {
                 let Some(reg) = &regions[k] else { continue };
-                let img = render_paired(renderer, &sampler, fields, fit.offset_steps, k)?;
+                let img = render_paired(renderer, &sampler, fields, fit.step_for(k))?;
                 ssim += score_ssim_in(&img, &frames[k], reg)?;
                 n += 1;
             }
@@ -1108,7 +1160,7 @@ pub fn compare(
     let mut render_scalar_gain = Vec::new();
     let mut background_only = Vec::new();
     for &k in &score_frames {
-        if k.saturating_sub(fit.offset_steps) > fields.len() {
+        if fit.step_for(k) > fields.len() {
             continue;
         }
         let region = regions[k].as_deref();
@@ -1125,10 +1177,10 @@ pub fn compare(
         }
         for (g, sm, col, dep, sink) in models {
             set_optics(renderer, g, sm, &col, &dep);
-            let img = render_paired(renderer, &sampler, fields, fit.offset_steps, k)?;
+            let img = render_paired(renderer, &sampler, fields, fit.step_for(k))?;
             sink.push(RenderScore {
                 frame: k,
-                fem_step: k.saturating_sub(fit.offset_steps).min(fields.len()),
+                fem_step: fit.step_for(k).min(fields.len()),
                 ..score_frame(&img, &frames[k], bg, &opts.mask, region)?
             });
         }
@@ -1168,12 +1220,12 @@ pub fn write_figures(
 ) -> Result<Vec<String>> {
     let bg = &frames[0];
     let sampler = SurfaceSampler::new(gel, bg.rows, bg.cols, &c.fit.map);
-    let img = render_paired(renderer, &sampler, fields, c.fit.offset_steps, k)?;
+    let img = render_paired(renderer, &sampler, fields, c.fit.step_for(k))?;
     let diff = difference_image(&img, &frames[k], 4.0);
     let p1 = dir.join(format!("compare_{k:02}.png"));
     side_by_side(&[&frames[k], &img, &diff])?.write_png(&p1)?;
     let real = measured_mask(&frames[k], bg, &opts.mask)?;
-    let fm = match fem_field(fields, c.fit.offset_steps, k) {
+    let fm = match fem_field(fields, c.fit.step_for(k)) {
         Some(u) => {
             let grid = Grid::for_gel(gel);
             warp_mask(
@@ -1267,6 +1319,9 @@ mod tests {
         .unwrap();
         let f = OpticsFile::read(&good).unwrap();
         assert_eq!(f.offset_steps, 16);
+        // A map written before the rate was fitted pairs one step per frame.
+        assert_eq!(f.steps_per_frame, 1.0);
+        assert_eq!((f.step_for(16), f.step_for(20)), (0, 4));
         assert!(f.map.mirror && f.map.px_per_m == 17000.0);
         let bg = RgbImage {
             rows: 4,

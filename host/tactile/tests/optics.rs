@@ -343,16 +343,21 @@ fn measured_mask_of_a_known_blob() {
     assert_eq!(quiet.count(), 0);
 }
 
-/// Masks made by warping gel-grid ellipses through a known map are fitted back: the map and
-/// the step offset are recovered and the IoU is near 1.
-#[test]
-fn map_fit_recovers_a_known_map() {
-    let gel_grid = Grid {
+/// A gel grid of 240 x 320 pixels of 0.0625 mm (the whole DIGIT gel at the frames' size).
+fn gel_grid_240x320() -> Grid {
+    Grid {
         origin_m: [0.0, 0.0],
         pixel_m: 0.0625e-3,
         cols: 320,
         rows: 240,
-    };
+    }
+}
+
+/// Masks made by warping gel-grid ellipses through a known map are fitted back: the map and
+/// the step offset are recovered and the IoU is near 1.
+#[test]
+fn map_fit_recovers_a_known_map() {
+    let gel_grid = gel_grid_240x320();
     let truth = CameraMap {
         px_per_m: 1.0 / 0.07e-3,
         angle_rad: 0.3,
@@ -385,7 +390,7 @@ fn map_fit_recovers_a_known_map() {
         .collect();
     let fit: Vec<usize> = (1..=30).filter(|k| k % 2 == 0).collect();
     let score: Vec<usize> = (1..=30).filter(|k| k % 2 == 1).collect();
-    let f = real::fit_map(&real_masks, &fem, &fit, 1..=5, None).unwrap();
+    let f = real::fit_map(&real_masks, &fem, &fit, 1..=5, None, 1.0).unwrap();
     assert_eq!(f.offset_steps, offset);
     assert!(f.fit_iou > 0.95, "{}", f.fit_iou);
     let s = real::score_map(&real_masks, &fem, &f, &score).unwrap();
@@ -412,16 +417,16 @@ fn map_fit_recovers_a_known_map() {
         score_frames: score.clone(),
         mask: MaskOptions::default(),
     };
-    let (lo, hi) = pairs.offsets(1).unwrap();
+    let (lo, hi) = pairs.offsets(1, 1.0).unwrap();
     assert!((lo..=hi).contains(&offset), "{lo}..={hi}");
-    let f = pairs.fit(lo..=hi, None).unwrap();
+    let f = pairs.fit(lo..=hi, None, 1.0).unwrap();
     assert_eq!(f.offset_steps, offset);
     let s = pairs.score(&f).unwrap();
     assert!(s.iter().all(|m| m.iou > 0.9), "{s:?}");
 
     // A scale that is known is kept: the true one fits as well as a free fit, a wrong one
     // (20 % too large) cannot reach it even though the step offset partly makes up for it.
-    let held = pairs.fit(lo..=hi, Some(truth.px_per_m)).unwrap();
+    let held = pairs.fit(lo..=hi, Some(truth.px_per_m), 1.0).unwrap();
     assert_eq!(held.map.px_per_m, truth.px_per_m);
     // (frame 2's noise pixels cost every fit here one fitting pair: 1/15 of the mean)
     assert!(
@@ -430,7 +435,7 @@ fn map_fit_recovers_a_known_map() {
         held.fit_iou,
         f.fit_iou
     );
-    let wrong = pairs.fit(lo..=hi, Some(1.2 * truth.px_per_m)).unwrap();
+    let wrong = pairs.fit(lo..=hi, Some(1.2 * truth.px_per_m), 1.0).unwrap();
     assert_eq!(wrong.map.px_per_m, 1.2 * truth.px_per_m);
     assert!(
         wrong.fit_iou < held.fit_iou - 0.03,
@@ -438,6 +443,73 @@ fn map_fit_recovers_a_known_map() {
         wrong.fit_iou,
         held.fit_iou
     );
+}
+
+/// Real frames that are samples of a faster indentation (1.5 FEM steps per frame) are fitted
+/// back at that rate with its offset, and at the rate the masks fit better than at one step
+/// per frame with the best offset and map there; a rate that is not positive is refused.
+#[test]
+fn map_fit_recovers_the_steps_per_frame() {
+    let gel_grid = gel_grid_240x320();
+    let truth = CameraMap {
+        px_per_m: 1.0 / 0.06e-3,
+        angle_rad: -0.5,
+        mirror: false,
+        offset_px: [60.0, 150.0],
+    };
+    // FEM masks: an ellipse whose length grows as the square root of the step (a dome's
+    // contact) and whose width grows linearly (a wedge's), so no scale or shift of one step
+    // looks like another.
+    let fem: Vec<_> = (1..=60)
+        .map(|j| {
+            let a = 0.5e-3 * (j as f64).sqrt();
+            let b = 0.04e-3 * j as f64;
+            mask_from_fn(gel_grid, |r, c| {
+                let p = gel_grid.center(r, c);
+                let (x, y) = (p[0] - 9e-3, p[1] - 7e-3);
+                (x / a).powi(2) + (y / b).powi(2) < 1.0
+            })
+        })
+        .collect();
+    let (offset, rate) = (4, 1.5);
+    let real_masks: Vec<_> = (0..=40)
+        .map(|k| match real::paired_step(k, offset, rate) {
+            j @ 1..=60 => real::warp_mask(&fem[j - 1], &truth, 240, 320),
+            _ => mask_from_fn(real::image_grid(240, 320), |_, _| false),
+        })
+        .collect();
+    let pairs = real::MaskPairs {
+        real: real_masks,
+        fem,
+        fit_frames: (1..=40).filter(|k| k % 2 == 0).collect(),
+        score_frames: (1..=40).filter(|k| k % 2 == 1).collect(),
+        mask: MaskOptions::default(),
+    };
+    let fit_at = |r: f64| {
+        let (lo, hi) = pairs.offsets(3, r).unwrap();
+        pairs.fit(lo..=hi, Some(truth.px_per_m), r).unwrap()
+    };
+    let (at_rate, at_one) = (fit_at(rate), fit_at(1.0));
+    assert_eq!(at_rate.offset_steps, offset);
+    assert_eq!(at_rate.steps_per_frame, rate);
+    assert!(at_rate.fit_iou > 0.95, "{}", at_rate.fit_iou);
+    assert!(
+        at_one.fit_iou < at_rate.fit_iou - 0.05,
+        "one step per frame {} against {}",
+        at_one.fit_iou,
+        at_rate.fit_iou
+    );
+    let scored = pairs.score(&at_rate).unwrap();
+    assert!(scored.iter().all(|m| m.iou > 0.9), "{scored:?}");
+    // The odd frames are paired at the rate: frame 9 with step round(5 x 1.5) = 8.
+    let f9 = scored.iter().find(|m| m.frame == 9).unwrap();
+    assert_eq!(f9.fem_step, 8);
+    for bad in [0.0, -1.0, f64::NAN] {
+        let e = real::fit_map(&pairs.real, &pairs.fem, &pairs.fit_frames, 1..=5, None, bad)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("steps per real frame"), "{e}");
+    }
 }
 
 /// The real calibration loads with its 125 bins; the real frames load at 240 x 320; the frame
@@ -681,7 +753,10 @@ fn compare_matches_frames_rendered_from_its_own_fields() {
     let sampler = SurfaceSampler::new(&gel, rows, cols, &truth);
     let offset = 4;
     let frames: Vec<RgbImage> = (0..=steps + offset)
-        .map(|k| real::render_paired(&made, &sampler, &fields, offset, k).unwrap())
+        .map(|k| {
+            real::render_paired(&made, &sampler, &fields, real::paired_step(k, offset, 1.0))
+                .unwrap()
+        })
         .collect();
     let mut renderer = Renderer::new(bin_table(), &bg).unwrap();
     let opts = real::CompareOptions {

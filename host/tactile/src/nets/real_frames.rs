@@ -124,7 +124,7 @@ pub fn drift_removed(frame: &RgbImage, bg: &RgbImage) -> Result<RgbImage> {
 
 /// The colour transform that brings the real sensor's change into the rendered (calibrated)
 /// domain the network was trained in, fitted by least squares on the fitting frames `fit`:
-/// the FEM state paired with each real frame (`fields`, `fitted.offset_steps`) rendered by
+/// the FEM state paired with each real frame (`fields`, [`OpticsFile::step_for`]) rendered by
 /// `renderer` (the optics the network's pairs were rendered with) through the fitted camera map,
 /// against the real frame, drift removed, over every pixel. It is the same fit as the optics'
 /// ([`real::fit_colour`]) with the roles of real and rendered exchanged: it minimises the error
@@ -144,7 +144,7 @@ pub fn fit_recolour(
     let sampler = crate::optics::SurfaceSampler::new(gel, bg.rows, bg.cols, &fitted.map);
     let rendered = fit
         .iter()
-        .map(|&k| real::render_paired(renderer, &sampler, fields, fitted.offset_steps, k))
+        .map(|&k| real::render_paired(renderer, &sampler, fields, fitted.step_for(k)))
         .collect::<Result<Vec<_>>>()?;
     let real_frames = fit
         .iter()
@@ -391,9 +391,7 @@ pub fn perceive_real(
             real_area_mm2: area(&measured),
             predicted_area_mm2: area(&predicted),
             predicted_depth_mm: -f64::from(dz.iter().copied().fold(0.0f32, f32::min)) * 1e3,
-            paired_fem_depth_mm: frame.saturating_sub(fitted.offset_steps) as f64
-                * opts.step_m
-                * 1e3,
+            paired_fem_depth_mm: fitted.step_for(frame) as f64 * opts.step_m * 1e3,
         });
     }
     Ok((out, pred))
