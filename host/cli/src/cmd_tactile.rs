@@ -1161,7 +1161,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     // candidate (tilt and mask threshold), the map and step offset are fitted against each on
     // the even frames and the best fit is kept; the odd frames score only the one kept.
     let mut tried = Vec::new();
-    let mut best: Option<(usize, f64, f64, Gel, Fields, Option<real::MaskFit>)> = None;
+    let mut best: Option<(usize, f64, Gel, Fields, Option<real::MaskFit>)> = None;
     let mut best_iou = f64::NEG_INFINITY;
     let mut fem_seconds = Vec::new();
     for (i, &(tilt, crown)) in shapes.iter().enumerate() {
@@ -1178,7 +1178,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         let (fields, secs) = edge_fem(&a, &gel, &grid, s, tilt, &dir)?;
         fem_seconds.extend(secs);
         if candidates == 1 {
-            best = Some((i, thresholds[0], rates[0], gel, fields, None));
+            best = Some((i, thresholds[0], gel, fields, None));
             break;
         }
         let mut kept = None;
@@ -1211,17 +1211,19 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
                 }));
                 if fit.fit_iou > best_iou {
                     best_iou = fit.fit_iou;
-                    kept = Some((threshold, rate, fit));
+                    kept = Some((threshold, fit));
                 }
             }
         }
-        if let Some((threshold, rate, fit)) = kept {
-            best = Some((i, threshold, rate, gel, fields, Some(fit)));
+        if let Some((threshold, fit)) = kept {
+            best = Some((i, threshold, gel, fields, Some(fit)));
         }
     }
-    let Some((chosen, threshold, rate, gel, fields, tilt_fit)) = best else {
+    let Some((chosen, threshold, gel, fields, tilt_fit)) = best else {
         bail!("no tilt candidates");
     };
+    // A single candidate is not fitted here: its rate is the one given (or saved).
+    let rate = tilt_fit.map_or(rates[0], |f| f.steps_per_frame);
     let (tilt, crown) = shapes[chosen];
     let mask_opts = MaskOptions {
         threshold,

@@ -936,11 +936,7 @@ fn smoothed_heights(
 /// The displacement of FEM step `step` (`fields[step - 1]`; None at step 0, before the touch,
 /// and past the last step).
 fn fem_field(fields: &[Vec<[f64; 3]>], step: usize) -> Option<&Vec<[f64; 3]>> {
-    if step >= 1 {
-        fields.get(step - 1)
-    } else {
-        None
-    }
+    fields.get(step.checked_sub(1)?)
 }
 
 /// Renders FEM step `step` (the background at step 0, before the touch), as paired with a
@@ -1041,7 +1037,7 @@ impl MaskPairs {
                 TactileError::Input("the FEM never reaches the 30 um mask threshold".into())
             })?
             + 1;
-        let centre = k0.saturating_sub((j0 as f64 / steps_per_frame.max(1e-3)).round() as usize);
+        let centre = k0.saturating_sub((j0 as f64 / steps_per_frame).round() as usize);
         Ok((centre.saturating_sub(window), centre + window))
     }
 
