@@ -3,7 +3,7 @@
 use crate::plot::{Chart, Series};
 use crate::progress::bar;
 use anyhow::{Context, bail};
-use ocm_tactile::gel::{Gel, GelMaterial};
+use ocm_tactile::gel::{Gel, GelMaterial, Skin};
 use ocm_tactile::image_io::read_gray;
 use ocm_tactile::indent::{IndentOptions, Indentation};
 use ocm_tactile::indenter::Indenter;
@@ -66,6 +66,13 @@ pub enum TactileCommand {
         /// mm (0: the flat mesh). `compare-real` fits 14 mm on the real edge6 frames.
         #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 0.0)]
         crown_radius_mm: f64,
+        /// Thickness of a surface layer of another stiffness (elements whose centroid lies
+        /// this far below the top face), um (0: none).
+        #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 0.0)]
+        skin_um: f64,
+        /// The surface layer's stiffness over the gel body's (with --skin-um).
+        #[arg(long, value_parser = crate::arg_check::positive, default_value_t = 1.0)]
+        skin_stiffness: f64,
         /// Write a VTK file every this many steps (0: none; the last step always).
         #[arg(long, default_value_t = 10)]
         vtk_every: usize,
@@ -173,6 +180,16 @@ pub enum TactileCommand {
         /// of the indenter's tip (default gel-centre; with --fit, the one in its map.json).
         #[arg(long, value_enum)]
         crown_apex: Option<CrownApex>,
+        /// Candidate thicknesses of a surface layer of another stiffness, um, comma-separated
+        /// (0: none; elements whose centroid lies this far below the top face). Each, crossed
+        /// with every --skin-stiffness, crown and tilt, is a FEM run of its own (default 0; with
+        /// --fit, the one in its map.json).
+        #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::non_negative)]
+        skin_um: Option<Vec<f64>>,
+        /// Candidate stiffnesses of that layer over the gel body's, comma-separated (default 1;
+        /// with --fit, the one in its map.json).
+        #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::positive)]
+        skin_stiffness: Option<Vec<f64>>,
         /// The camera's scale, mm of gel per pixel of the 240 x 320 frame, when it is known:
         /// the map fit then keeps it and fits only the rotation, shift and mirror.
         #[arg(long, value_parser = crate::arg_check::positive)]
@@ -185,7 +202,7 @@ pub enum TactileCommand {
         /// one in its map.json).
         #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::positive)]
         steps_per_frame: Option<Vec<f64>>,
-        /// Reuse the map, step offset and rate, mask threshold, tilt and crown of an earlier run (its map.json)
+        /// Reuse the map, step offset and rate, mask threshold, tilt, crown and skin of an earlier run (its map.json)
         /// instead of fitting them (the slow part); the optics are fitted anew.
         #[arg(long)]
         fit: Option<PathBuf>,
@@ -308,6 +325,8 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             young_pa,
             poisson,
             crown_radius_mm,
+            skin_um,
+            skin_stiffness,
             vtk_every,
             out,
             json,
@@ -333,7 +352,14 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 [0.0; 2],
                 crown_radius_mm,
                 CrownApex::GelCentre,
+                skin(skin_um, skin_stiffness),
             )?;
+            let skin_elements = gel
+                .model
+                .element_scale
+                .iter()
+                .filter(|&&k| k != 1.0)
+                .count();
             let indenter = Indenter::from_stl(&s.stl)?;
             let mut opts = IndentOptions::protocol(young_pa);
             opts.steps = steps;
@@ -388,6 +414,9 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 "indenter": indenter.name,
                 "mesh": mesh_file,
                 "crown_radius_mm": crown_radius_mm,
+                "skin_um": skin_um,
+                "skin_stiffness": skin_stiffness,
+                "skin_elements": skin_elements,
                 "nodes": gel.num_nodes(),
                 "steps": steps,
                 "depth_mm": last.depth_mm,
@@ -479,6 +508,8 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             roll_deg,
             crown_radius_mm,
             crown_apex,
+            skin_um,
+            skin_stiffness,
             mm_per_px,
             steps_per_frame,
             fit,
@@ -496,6 +527,8 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             roll_deg,
             crown_radius_mm,
             crown_apex,
+            skin_um,
+            skin_stiffness,
             mm_per_px,
             steps_per_frame,
             fit,
@@ -863,6 +896,8 @@ struct CompareArgs {
     roll_deg: Option<Vec<f64>>,
     crown_radius_mm: Option<Vec<f64>>,
     crown_apex: Option<CrownApex>,
+    skin_um: Option<Vec<f64>>,
+    skin_stiffness: Option<Vec<f64>>,
     mm_per_px: Option<f64>,
     steps_per_frame: Option<Vec<f64>>,
     fit: Option<PathBuf>,
@@ -936,10 +971,32 @@ fn apex_name(apex: CrownApex) -> String {
 /// Displacement fields of a FEM run, one per step.
 type Fields = Vec<Vec<[f64; 3]>>;
 
-/// The FEM cache of a candidate tilt and crown radius (mm, 0: flat): `fem` itself untilted
-/// and flat, else a sibling folder named after them.
-fn shape_cache(fem: &Path, tilt: [f64; 2], crown_mm: f64, apex: CrownApex) -> PathBuf {
-    if tilt == [0.0, 0.0] && crown_mm == 0.0 {
+/// The surface layer of `skin_um` um at `ratio` times the body's stiffness; a layer that
+/// changes nothing (no thickness, or the body's stiffness) is written as 0 um at 1.
+fn skin(skin_um: f64, ratio: f64) -> Skin {
+    let layer = Skin {
+        thickness_m: skin_um * 1e-6,
+        stiffness_ratio: ratio,
+    };
+    if has_skin(&layer) {
+        layer
+    } else {
+        Skin {
+            thickness_m: 0.0,
+            stiffness_ratio: 1.0,
+        }
+    }
+}
+
+/// Whether `skin` changes the gel.
+fn has_skin(skin: &Skin) -> bool {
+    skin.thickness_m > 0.0 && skin.stiffness_ratio != 1.0
+}
+
+/// The FEM cache of a candidate tilt, crown radius (mm, 0: flat) and surface layer: `fem`
+/// itself untilted, flat and uniform, else a sibling folder named after them.
+fn shape_cache(fem: &Path, tilt: [f64; 2], crown_mm: f64, apex: CrownApex, skin: &Skin) -> PathBuf {
+    if tilt == [0.0, 0.0] && crown_mm == 0.0 && !has_skin(skin) {
         return fem.to_path_buf();
     }
     let mut name = fem
@@ -959,12 +1016,19 @@ fn shape_cache(fem: &Path, tilt: [f64; 2], crown_mm: f64, apex: CrownApex) -> Pa
             name.push_str("-centre");
         }
     }
+    if has_skin(skin) {
+        name = format!(
+            "{name}-skin{}x{}",
+            skin.thickness_m * 1e6,
+            skin.stiffness_ratio
+        );
+    }
     fem.with_file_name(name)
 }
 
-/// The gel at `path` with its top crowned to `crown_mm` (0: flat) about `apex`: the centre of
+/// The gel at `path` with its top crowned to `crown_mm` (0: flat) about `apex` (the centre of
 /// its top face, or the point under the middle of the tip of set-up `s`'s indenter tilted by
-/// `tilt`.
+/// `tilt`) and its surface layer stiffened by `skin`.
 fn crowned_gel(
     path: &Path,
     material: GelMaterial,
@@ -972,31 +1036,37 @@ fn crowned_gel(
     tilt: [f64; 2],
     crown_mm: f64,
     apex: CrownApex,
+    skin: Skin,
 ) -> anyhow::Result<Gel> {
-    if crown_mm == 0.0 {
-        return Ok(Gel::digit(path, material)?);
+    let mut gel = if crown_mm == 0.0 {
+        Gel::digit(path, material)?
+    } else {
+        let apex_m = match apex {
+            CrownApex::Tip => {
+                let indenter = Indenter::from_stl(&s.stl)?;
+                let mut euler = s.placement.euler_deg;
+                euler[0] += tilt[0];
+                euler[1] += tilt[1];
+                let rot = ocm_tactile::indenter::Pose::rotation_from_degrees(euler);
+                // The tip's middle: where the flat gel is first pressed (its lowest 20 um).
+                let tip = indenter.tip_center_xy(&rot, 20e-6);
+                [s.placement.xy_m[0] + tip[0], s.placement.xy_m[1] + tip[1]]
+            }
+            CrownApex::GelCentre => {
+                let (lo, hi) = Gel::digit(path, material)?.top_bounds();
+                [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])]
+            }
+        };
+        let crown = ocm_tactile::gel::Crown {
+            radius_m: crown_mm * 1e-3,
+            apex_m,
+        };
+        Gel::digit_crowned(path, material, Some(&crown))?
+    };
+    if has_skin(&skin) {
+        gel.stiffen_skin(&skin)?;
     }
-    let apex_m = match apex {
-        CrownApex::Tip => {
-            let indenter = Indenter::from_stl(&s.stl)?;
-            let mut euler = s.placement.euler_deg;
-            euler[0] += tilt[0];
-            euler[1] += tilt[1];
-            let rot = ocm_tactile::indenter::Pose::rotation_from_degrees(euler);
-            // The tip's middle: where the flat gel is first pressed (its lowest 20 um).
-            let tip = indenter.tip_center_xy(&rot, 20e-6);
-            [s.placement.xy_m[0] + tip[0], s.placement.xy_m[1] + tip[1]]
-        }
-        CrownApex::GelCentre => {
-            let (lo, hi) = Gel::digit(path, material)?.top_bounds();
-            [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])]
-        }
-    };
-    let crown = ocm_tactile::gel::Crown {
-        radius_m: crown_mm * 1e-3,
-        apex_m,
-    };
-    Ok(Gel::digit_crowned(path, material, Some(&crown))?)
+    Ok(gel)
 }
 
 /// The FEM displacement fields of the set-up `s` tilted by `tilt` (degrees about the indenter's
@@ -1069,6 +1139,8 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         &a.pitch_deg,
         &a.roll_deg,
         &a.crown_radius_mm,
+        &a.skin_um,
+        &a.skin_stiffness,
         &a.steps_per_frame,
     ]
     .iter()
@@ -1076,7 +1148,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     .product::<usize>();
     if a.fit.is_some() && given > 1 {
         bail!(
-            "--fit reuses a fitted map: give the tilt, crown, threshold and steps per frame it was fitted with as one --pitch-deg, --roll-deg, --crown-radius-mm, --threshold and --steps-per-frame, or none (got {given} candidates)"
+            "--fit reuses a fitted map: give the tilt, crown, skin, threshold and steps per frame it was fitted with as one --pitch-deg, --roll-deg, --crown-radius-mm, --skin-um, --skin-stiffness, --threshold and --steps-per-frame, or none (got {given} candidates)"
         );
     }
     let saved = a.fit.as_deref().map(read_map_json).transpose()?;
@@ -1144,10 +1216,25 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         })
         .transpose()?;
     let apex = a.crown_apex.or(saved_apex).unwrap_or(CrownApex::GelCentre);
-    let shapes: Vec<([f64; 2], f64)> = tilts
-        .iter()
-        .flat_map(|&t| crowns.iter().map(move |&c| (t, c)))
-        .collect();
+    let skins: Vec<Skin> = or_saved(&a.skin_um, "/skin_um", &[0.0], 0.0)
+        .into_iter()
+        .flat_map(|t| {
+            or_saved(&a.skin_stiffness, "/skin_stiffness", &[1.0], 1.0)
+                .into_iter()
+                .map(move |k| skin(t, k))
+        })
+        .fold(Vec::new(), |mut v, k| {
+            if !v.contains(&k) {
+                v.push(k);
+            }
+            v
+        });
+    let mut shapes: Vec<([f64; 2], f64, Skin)> = Vec::new();
+    for &t in &tilts {
+        for &c in &crowns {
+            shapes.extend(skins.iter().map(|&k| (t, c, k)));
+        }
+    }
     let candidates = shapes.len() * thresholds.len() * rates.len();
     let digit = ocm_datadir::data_file(a.data.as_deref(), "digit")?;
     let frames = real::load_frames(&digit.join("real-frames-edge6"), "edge6")?;
@@ -1164,7 +1251,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     let mut best: Option<(usize, f64, Gel, Fields, Option<real::MaskFit>)> = None;
     let mut best_iou = f64::NEG_INFINITY;
     let mut fem_seconds = Vec::new();
-    for (i, &(tilt, crown)) in shapes.iter().enumerate() {
+    for (i, &(tilt, crown, skin)) in shapes.iter().enumerate() {
         let gel = crowned_gel(
             &digit.join(mesh_file(a.mesh)),
             GelMaterial::default(),
@@ -1172,9 +1259,10 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             tilt,
             crown,
             apex,
+            skin,
         )?;
         let grid = Grid::for_gel(&gel);
-        let dir = shape_cache(&a.fem, tilt, crown, apex);
+        let dir = shape_cache(&a.fem, tilt, crown, apex, &skin);
         let (fields, secs) = edge_fem(&a, &gel, &grid, s, tilt, &dir)?;
         fem_seconds.extend(secs);
         if candidates == 1 {
@@ -1193,8 +1281,11 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
                 let pb = bar(
                     1,
                     &format!(
-                        "map fit: pitch {} roll {} deg, crown {crown} mm, threshold {threshold}, {rate} steps per frame",
-                        tilt[0], tilt[1]
+                        "map fit: pitch {} roll {} deg, crown {crown} mm, skin {} um x {}, threshold {threshold}, {rate} steps per frame",
+                        tilt[0],
+                        tilt[1],
+                        skin.thickness_m * 1e6,
+                        skin.stiffness_ratio
                     ),
                 );
                 let fit = pairs.fit(lo..=hi, a.mm_per_px.map(|v| 1e3 / v), rate)?;
@@ -1203,6 +1294,8 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
                     "pitch_deg": tilt[0],
                     "roll_deg": tilt[1],
                     "crown_radius_mm": crown,
+                    "skin_um": skin.thickness_m * 1e6,
+                    "skin_stiffness": skin.stiffness_ratio,
                     "threshold": threshold,
                     "steps_per_frame": rate,
                     "fem_cache": dir.display().to_string(),
@@ -1224,7 +1317,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     };
     // A single candidate is not fitted here: its rate is the one given (or saved).
     let rate = tilt_fit.map_or(rates[0], |f| f.steps_per_frame);
-    let (tilt, crown) = shapes[chosen];
+    let (tilt, crown, skin) = shapes[chosen];
     let mask_opts = MaskOptions {
         threshold,
         ..MaskOptions::default()
@@ -1302,18 +1395,27 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     // The goal is judged where the contact is: over the whole frame the unchanged background
     // alone scores about 0.95.
     let ssim_med = median(&opt(&c.render, |r| r.contact_ssim));
+    let skin_json = serde_json::json!({
+        "thickness_um": skin.thickness_m * 1e6,
+        "stiffness_ratio": skin.stiffness_ratio,
+        "tried": skins
+            .iter()
+            .map(|k| [k.thickness_m * 1e6, k.stiffness_ratio])
+            .collect::<Vec<_>>(),
+    });
     let v = serde_json::json!({
         "setup": s.name,
         "mesh": mesh_file(a.mesh),
         "nodes": gel.num_nodes(),
         "fem_steps": fields.len(),
         "fem_seconds": fem_seconds,
-        "fem_cache": shape_cache(&a.fem, tilt, crown, apex).display().to_string(),
+        "fem_cache": shape_cache(&a.fem, tilt, crown, apex, &skin).display().to_string(),
         "tilt_deg": {"pitch": tilt[0], "roll": tilt[1]},
         "crown_radius_mm": crown,
         "crown_apex": apex_name(apex),
         "crown_cap_share": ocm_tactile::gel::CROWN_MAX_DROP_SHARE,
         "crowns_tried": crowns,
+        "skin": skin_json,
         "tilts_tried": tried,
         "frames": frames.len(),
         "fit_frames": "even 2..98",
@@ -1373,6 +1475,8 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             "crown_radius_mm": crown,
             "crown_apex": apex_name(apex),
             "crown_cap_share": ocm_tactile::gel::CROWN_MAX_DROP_SHARE,
+            "skin_um": skin.thickness_m * 1e6,
+            "skin_stiffness": skin.stiffness_ratio,
             "gain": c.gain,
             "smooth_px": c.smooth_px,
             "colour": c.colour,
@@ -1900,4 +2004,40 @@ fn reduce(a: ReduceArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A FEM cache belongs to one gel shape: a skin without thickness or of the body's own
+    /// stiffness is the plain gel's cache, any other skin, crown or tilt a folder of its own.
+    #[test]
+    fn every_gel_shape_has_its_own_fem_cache() {
+        let fem = Path::new("out/tactile/edge6-fem");
+        let apex = CrownApex::Tip;
+        let plain = shape_cache(fem, [0.0; 2], 0.0, apex, &skin(0.0, 1.0));
+        assert_eq!(plain, fem);
+        assert_eq!(shape_cache(fem, [0.0; 2], 0.0, apex, &skin(0.0, 10.0)), fem);
+        assert_eq!(
+            shape_cache(fem, [0.0; 2], 0.0, apex, &skin(450.0, 1.0)),
+            fem
+        );
+        // Written alike, so that the summary and map.json do not name a ratio without a layer.
+        assert_eq!(skin(0.0, 10.0), skin(450.0, 1.0));
+        assert_eq!(skin(0.0, 10.0).stiffness_ratio, 1.0);
+        let mut names = std::collections::BTreeSet::new();
+        for tilt in [[0.0, 0.0], [0.0, -8.0]] {
+            for crown in [0.0, 25.0] {
+                for (t, k) in [(0.0, 1.0), (450.0, 10.0), (450.0, 20.0), (600.0, 10.0)] {
+                    names.insert(shape_cache(fem, tilt, crown, apex, &skin(t, k)));
+                }
+            }
+        }
+        assert_eq!(names.len(), 2 * 2 * 4);
+        assert_eq!(
+            shape_cache(fem, [0.0, -8.0], 25.0, apex, &skin(450.0, 10.0)),
+            Path::new("out/tactile/edge6-fem-pitch0-roll-8-crown25-cap0.7-skin450x10")
+        );
+    }
 }

@@ -200,12 +200,34 @@ fn compare_real_candidates_are_checked_before_any_work() {
         "--steps-per-frame",
         "must be greater than 0",
     );
+    refused_flag(
+        &["tactile", "compare-real", "--skin-um=100,-5"],
+        "--skin-um",
+        "must be 0 or more",
+    );
+    refused_flag(
+        &["tactile", "compare-real", "--skin-stiffness=3,0"],
+        "--skin-stiffness",
+        "must be greater than 0",
+    );
+    refused_flag(
+        &[
+            "tactile",
+            "indent",
+            "--setup",
+            "edge6",
+            "--skin-stiffness=nan",
+        ],
+        "--skin-stiffness",
+        "finite",
+    );
     // a fitted map belongs to one tilt, crown and threshold; several candidates with it are
     // refused before the frames, the mesh or the FEM are touched
     for (candidates, n) in [
         ("--roll-deg=-2,0,2", 3),
         ("--crown-radius-mm=0,20", 2),
         ("--steps-per-frame=1,1.2", 2),
+        ("--skin-stiffness=3,10", 2),
     ] {
         let e = fails(&[
             "tactile",

@@ -266,6 +266,129 @@ impl Crown {
     }
 }
 
+/// A surface layer of the gel stiffer (or softer) than its body: every element whose centroid
+/// lies less than `thickness_m` below the top face has its stiffness scaled by
+/// `stiffness_ratio` (the FEM's per-element scale). Real DIGIT gels carry a reflective coating,
+/// and a stiff skin spreads a contact's deformation beyond the contact like a plate.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Skin {
+    /// Thickness below the top face, m.
+    pub thickness_m: f64,
+    /// The layer's stiffness over the body's (1: the same gel).
+    pub stiffness_ratio: f64,
+}
+
+impl Skin {
+    /// Checks the parameters a user gives: a finite non-negative thickness and a finite
+    /// positive stiffness ratio.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.thickness_m >= 0.0 && self.thickness_m.is_finite()) {
+            return Err(TactileError::Input(format!(
+                "the skin's thickness must be finite and not negative (got {} m)",
+                self.thickness_m
+            )));
+        }
+        if !(self.stiffness_ratio > 0.0 && self.stiffness_ratio.is_finite()) {
+            return Err(TactileError::Input(format!(
+                "the skin's stiffness ratio must be finite and positive (got {})",
+                self.stiffness_ratio
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl Gel {
+    /// Depth of every element's centroid below the top face, m: the height of the top face
+    /// over the centroid (interpolated on the top triangle above it) minus the centroid's
+    /// height; infinite where no top triangle lies above it.
+    pub fn element_depths_m(&self) -> Vec<f64> {
+        let pts = &self.mesh.points;
+        let (lo, hi) = self.top_bounds();
+        let n_tri = self.top_triangles.len().max(1);
+        // About two triangles per cell.
+        let cells_per_side = ((n_tri as f64 / 2.0).sqrt().ceil() as usize).clamp(1, 512);
+        let size = [
+            ((hi[0] - lo[0]) / cells_per_side as f64).max(f64::MIN_POSITIVE),
+            ((hi[1] - lo[1]) / cells_per_side as f64).max(f64::MIN_POSITIVE),
+        ];
+        let cell = |v: f64, k: usize| -> usize {
+            (((v - lo[k]) / size[k]).floor().max(0.0) as usize).min(cells_per_side - 1)
+        };
+        let mut buckets: Vec<Vec<usize>> = vec![Vec::new(); cells_per_side * cells_per_side];
+        for (t, tri) in self.top_triangles.iter().enumerate() {
+            let (mut a, mut b) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            for &i in tri {
+                for k in 0..2 {
+                    a[k] = a[k].min(pts[i][k]);
+                    b[k] = b[k].max(pts[i][k]);
+                }
+            }
+            for cx in cell(a[0], 0)..=cell(b[0], 0) {
+                for cy in cell(a[1], 1)..=cell(b[1], 1) {
+                    buckets[cx * cells_per_side + cy].push(t);
+                }
+            }
+        }
+        // The top face's height at (x, y), if a top triangle lies over it.
+        let top_z = |x: f64, y: f64| -> Option<f64> {
+            if x < lo[0] || x > hi[0] || y < lo[1] || y > hi[1] {
+                return None;
+            }
+            let b = &buckets[cell(x, 0) * cells_per_side + cell(y, 1)];
+            b.iter().find_map(|&t| {
+                let [p, q, r] = self.top_triangles[t].map(|i| pts[i]);
+                let det = (q[0] - p[0]) * (r[1] - p[1]) - (r[0] - p[0]) * (q[1] - p[1]);
+                if det.abs() < f64::MIN_POSITIVE {
+                    return None;
+                }
+                let l1 = ((x - p[0]) * (r[1] - p[1]) - (r[0] - p[0]) * (y - p[1])) / det;
+                let l2 = ((q[0] - p[0]) * (y - p[1]) - (x - p[0]) * (q[1] - p[1])) / det;
+                let l0 = 1.0 - l1 - l2;
+                let eps = -1e-9;
+                (l0 >= eps && l1 >= eps && l2 >= eps).then(|| l0 * p[2] + l1 * q[2] + l2 * r[2])
+            })
+        };
+        self.mesh
+            .tets
+            .iter()
+            .map(|t| {
+                let c = t.iter().fold([0.0; 3], |mut c, &i| {
+                    for k in 0..3 {
+                        c[k] += 0.25 * pts[i][k];
+                    }
+                    c
+                });
+                top_z(c[0], c[1]).map_or(f64::INFINITY, |z| z - c[2])
+            })
+            .collect()
+    }
+
+    /// Scales the stiffness of the elements within `skin` below the top face (on top of any
+    /// scale they had); returns how many were scaled. A thickness of 0 scales none; a thicker
+    /// layer that holds no element's centroid (a mesh too coarse for it) is an error.
+    pub fn stiffen_skin(&mut self, skin: &Skin) -> Result<usize> {
+        skin.validate()?;
+        let depths = self.element_depths_m();
+        let mut count = 0;
+        for (scale, &d) in self.model.element_scale.iter_mut().zip(&depths) {
+            if d < skin.thickness_m {
+                *scale *= skin.stiffness_ratio;
+                count += 1;
+            }
+        }
+        if count == 0 && skin.thickness_m > 0.0 {
+            let shallowest = depths.iter().copied().fold(f64::INFINITY, f64::min);
+            return Err(TactileError::Input(format!(
+                "a skin {:.1} um thick holds no element of this mesh: the shallowest element centroid lies {:.1} um below the top face",
+                skin.thickness_m * 1e6,
+                shallowest * 1e6
+            )));
+        }
+        Ok(count)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -343,5 +466,141 @@ mod tests {
                 .to_string()
                 .contains("base")
         );
+    }
+
+    /// On a flat box every element's depth is the top's height minus its centroid's; on a
+    /// crowned box the bucketed search finds the same top triangle as a search over all of
+    /// them, and the skin scales exactly the elements above its thickness.
+    #[test]
+    fn skin_depths_follow_the_top_face() {
+        let flat = ocm_fem::mesh::generate::box_mesh([6, 5, 4], [3e-3, 2.5e-3, 2e-3]);
+        let gel = Gel::from_mesh(flat.clone(), GelMaterial::default(), 0.0).unwrap();
+        let depths = gel.element_depths_m();
+        assert_eq!(depths.len(), gel.model.elements.len());
+        for (t, d) in gel.mesh.tets.iter().zip(&depths) {
+            let cz = t.iter().map(|&i| gel.mesh.points[i][2]).sum::<f64>() / 4.0;
+            assert!((d - (2e-3 - cz)).abs() < 1e-15, "{d} against {}", 2e-3 - cz);
+        }
+        let mut crowned = flat;
+        Crown {
+            radius_m: 4e-3,
+            apex_m: [1.2e-3, 1.0e-3],
+        }
+        .apply(&mut crowned, 0.0)
+        .unwrap();
+        let gel = Gel::from_mesh(crowned, GelMaterial::default(), 0.0).unwrap();
+        let depths = gel.element_depths_m();
+        let pts = &gel.mesh.points;
+        for (t, d) in gel.mesh.tets.iter().zip(&depths) {
+            let c = t.iter().fold([0.0; 3], |mut c, &i| {
+                (0..3).for_each(|k| c[k] += 0.25 * pts[i][k]);
+                c
+            });
+            // Every top triangle, with a tolerance on its edges: the one over the centroid.
+            let above = gel.top_triangles.iter().find_map(|tri| {
+                let [p, q, r] = tri.map(|i| pts[i]);
+                let det = (q[0] - p[0]) * (r[1] - p[1]) - (r[0] - p[0]) * (q[1] - p[1]);
+                let l1 = ((c[0] - p[0]) * (r[1] - p[1]) - (r[0] - p[0]) * (c[1] - p[1])) / det;
+                let l2 = ((q[0] - p[0]) * (c[1] - p[1]) - (c[0] - p[0]) * (q[1] - p[1])) / det;
+                let l0 = 1.0 - l1 - l2;
+                (l0.min(l1).min(l2) >= -1e-9).then(|| l0 * p[2] + l1 * q[2] + l2 * r[2])
+            });
+            let want = above.expect("a top triangle over every centroid") - c[2];
+            assert!((d - want).abs() < 1e-12, "{d} against {want}");
+            assert!(*d > 0.0);
+        }
+        let skin = Skin {
+            thickness_m: 0.3e-3,
+            stiffness_ratio: 4.0,
+        };
+        let mut stiff = gel.clone();
+        let n = stiff.stiffen_skin(&skin).unwrap();
+        let want = depths.iter().filter(|&&d| d < 0.3e-3).count();
+        assert!(n == want && n > 0 && n < depths.len());
+        for (s, d) in stiff.model.element_scale.iter().zip(&depths) {
+            assert_eq!(*s, if *d < 0.3e-3 { 4.0 } else { 1.0 });
+        }
+        // Thinner than the top layer's shallowest centroid: no element, an error naming it.
+        let shallowest = depths.iter().copied().fold(f64::INFINITY, f64::min);
+        let e = stiff
+            .clone()
+            .stiffen_skin(&Skin {
+                thickness_m: 0.5 * shallowest,
+                stiffness_ratio: 2.0,
+            })
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("holds no element"), "{e}");
+        let none = Skin {
+            thickness_m: 0.0,
+            stiffness_ratio: 2.0,
+        };
+        assert_eq!(stiff.clone().stiffen_skin(&none).unwrap(), 0);
+        for bad in [
+            Skin {
+                thickness_m: -1e-4,
+                stiffness_ratio: 2.0,
+            },
+            Skin {
+                thickness_m: f64::NAN,
+                stiffness_ratio: 2.0,
+            },
+            Skin {
+                thickness_m: 1e-4,
+                stiffness_ratio: 0.0,
+            },
+            Skin {
+                thickness_m: 1e-4,
+                stiffness_ratio: f64::INFINITY,
+            },
+        ] {
+            let e = stiff.clone().stiffen_skin(&bad).unwrap_err().to_string();
+            assert!(e.contains("skin"), "{e}");
+        }
+    }
+
+    /// A block on rollers with its top pressed down uniformly, a quarter of its height made
+    /// stiffer: the two layers carry the same stress in series, so (with nu = 0, no lateral
+    /// strain to match) the strain energy is A d^2 / (2 (h_s / (k E) + (H - h_s) / E)).
+    #[test]
+    fn a_stiff_skin_acts_in_series_with_the_body() {
+        let (lx, ly, h) = (2e-3, 1.5e-3, 2e-3);
+        let e = 0.3e6;
+        let material = GelMaterial {
+            young_pa: e,
+            poisson: 0.0,
+        };
+        let d = 0.2e-6;
+        let energy = |skin: Option<Skin>| {
+            let mesh = ocm_fem::mesh::generate::box_mesh([3, 2, 4], [lx, ly, h]);
+            let tol = 1e-9;
+            let mut gel =
+                Gel::with_constraints(mesh, material, |p| [p.x <= tol, p.y <= tol, p.z <= tol])
+                    .unwrap();
+            let scaled = skin.map_or(0, |s| gel.stiffen_skin(&s).unwrap());
+            for &i in &gel.top {
+                gel.model.prescribe(i, 2, -d);
+            }
+            let mut solver = ocm_fem::solve::statics::StaticSolver::new(&gel.model).unwrap();
+            let loads = ocm_fem::model::Loads {
+                pressures_pa: vec![],
+            };
+            let (_, report) = solver.solve_from_rest(&gel.model, &loads).unwrap();
+            (report.strain_energy, scaled)
+        };
+        let series = |k: f64| 0.5 * lx * ly * d * d / (0.5e-3 / (k * e) + 1.5e-3 / e);
+        let (plain, none) = energy(None);
+        assert_eq!(none, 0);
+        assert!((plain - series(1.0)).abs() < 1e-4 * series(1.0), "{plain}");
+        for k in [4.0, 0.25] {
+            // The top hex layer is 0.5 mm thick: its tets' centroids lie 0.125-0.375 mm deep.
+            let (u, scaled) = energy(Some(Skin {
+                thickness_m: 0.45e-3,
+                stiffness_ratio: k,
+            }));
+            assert_eq!(scaled, 3 * 2 * 6);
+            println!("k {k}: energy {u:e} J, series {:e} J", series(k));
+            assert!((u - series(k)).abs() < 1e-4 * series(k), "k {k}: {u}");
+        }
     }
 }
