@@ -345,6 +345,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 MeshArg::Coarse => "DIGIT_remesh2.vtk",
             };
             let material = GelMaterial { young_pa, poisson };
+            let layer = skin(skin_um, skin_stiffness);
             let gel = crowned_gel(
                 &digit.join(mesh_file),
                 material,
@@ -352,7 +353,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 [0.0; 2],
                 crown_radius_mm,
                 CrownApex::GelCentre,
-                skin(skin_um, skin_stiffness),
+                layer,
             )?;
             let skin_elements = gel
                 .model
@@ -414,8 +415,8 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 "indenter": indenter.name,
                 "mesh": mesh_file,
                 "crown_radius_mm": crown_radius_mm,
-                "skin_um": skin_um,
-                "skin_stiffness": skin_stiffness,
+                "skin_um": layer.thickness_m * 1e6,
+                "skin_stiffness": layer.stiffness_ratio,
                 "skin_elements": skin_elements,
                 "nodes": gel.num_nodes(),
                 "steps": steps,

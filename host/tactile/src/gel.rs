@@ -266,6 +266,28 @@ impl Crown {
     }
 }
 
+/// Twice the signed area of the triangle (a, b, c) in the plane (positive anticlockwise).
+pub fn doubled_area(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
+    (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])
+}
+
+/// Barycentric weights of `q` in the triangle (a, b, c) of doubled signed area `det`
+/// ([`doubled_area`], not zero), or None when `q` lies outside it beyond a 1e-9 tolerance on
+/// the weights (points on a shared edge belong to both triangles).
+pub fn barycentric(
+    a: [f64; 2],
+    b: [f64; 2],
+    c: [f64; 2],
+    det: f64,
+    q: [f64; 2],
+) -> Option<[f64; 3]> {
+    let l1 = ((b[0] - q[0]) * (c[1] - q[1]) - (c[0] - q[0]) * (b[1] - q[1])) / det;
+    let l2 = ((c[0] - q[0]) * (a[1] - q[1]) - (a[0] - q[0]) * (c[1] - q[1])) / det;
+    let l3 = 1.0 - l1 - l2;
+    let eps = -1e-9;
+    (l1 >= eps && l2 >= eps && l3 >= eps).then_some([l1, l2, l3])
+}
+
 /// A surface layer of the gel stiffer (or softer) than its body: every element whose centroid
 /// lies less than `thickness_m` below the top face has its stiffness scaled by
 /// `stiffness_ratio` (the FEM's per-element scale). Real DIGIT gels carry a reflective coating,
@@ -338,15 +360,13 @@ impl Gel {
             let b = &buckets[cell(x, 0) * cells_per_side + cell(y, 1)];
             b.iter().find_map(|&t| {
                 let [p, q, r] = self.top_triangles[t].map(|i| pts[i]);
-                let det = (q[0] - p[0]) * (r[1] - p[1]) - (r[0] - p[0]) * (q[1] - p[1]);
-                if det.abs() < f64::MIN_POSITIVE {
+                let [a, b, c] = [p, q, r].map(|v| [v[0], v[1]]);
+                let det = doubled_area(a, b, c);
+                if det.abs() < 1e-30 {
                     return None;
                 }
-                let l1 = ((x - p[0]) * (r[1] - p[1]) - (r[0] - p[0]) * (y - p[1])) / det;
-                let l2 = ((q[0] - p[0]) * (y - p[1]) - (x - p[0]) * (q[1] - p[1])) / det;
-                let l0 = 1.0 - l1 - l2;
-                let eps = -1e-9;
-                (l0 >= eps && l1 >= eps && l2 >= eps).then(|| l0 * p[2] + l1 * q[2] + l2 * r[2])
+                let l = barycentric(a, b, c, det, [x, y])?;
+                Some(l[0] * p[2] + l[1] * q[2] + l[2] * r[2])
             })
         };
         self.mesh

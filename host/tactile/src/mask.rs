@@ -55,7 +55,7 @@ pub fn rasterize(gel: &Gel, grid: &Grid, nodal: &[f64]) -> Vec<f64> {
     let p = &gel.mesh.points;
     for t in &gel.top_triangles {
         let [a, b, c] = t.map(|i| [p[i][0], p[i][1]]);
-        let det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+        let det = crate::gel::doubled_area(a, b, c);
         if det.abs() < 1e-30 {
             continue;
         }
@@ -72,12 +72,9 @@ pub fn rasterize(gel: &Gel, grid: &Grid, nodal: &[f64]) -> Vec<f64> {
         let v = t.map(|i| nodal[i]);
         for row in r0..=r1 as usize {
             for col in c0..=c1 as usize {
-                let q = grid.center(row, col);
-                let l1 = ((b[0] - q[0]) * (c[1] - q[1]) - (c[0] - q[0]) * (b[1] - q[1])) / det;
-                let l2 = ((c[0] - q[0]) * (a[1] - q[1]) - (a[0] - q[0]) * (c[1] - q[1])) / det;
-                let l3 = 1.0 - l1 - l2;
-                let eps = -1e-9;
-                if l1 >= eps && l2 >= eps && l3 >= eps {
+                if let Some([l1, l2, l3]) =
+                    crate::gel::barycentric(a, b, c, det, grid.center(row, col))
+                {
                     img[row * grid.cols + col] = l1 * v[0] + l2 * v[1] + l3 * v[2];
                 }
             }

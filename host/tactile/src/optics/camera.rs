@@ -126,7 +126,7 @@ impl SurfaceSampler {
         let p = &gel.mesh.points;
         for t in &gel.top_triangles {
             let [a, b, c] = t.map(|i| map.to_px([p[i][0], p[i][1]]));
-            let det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1]);
+            let det = crate::gel::doubled_area(a, b, c);
             if det.abs() < 1e-12 {
                 continue;
             }
@@ -142,11 +142,7 @@ impl SurfaceSampler {
             for row in r0 as usize..=r1 as usize {
                 for col in c0 as usize..=c1 as usize {
                     let q = [col as f64 + 0.5, row as f64 + 0.5];
-                    let l1 = ((b[0] - q[0]) * (c[1] - q[1]) - (c[0] - q[0]) * (b[1] - q[1])) / det;
-                    let l2 = ((c[0] - q[0]) * (a[1] - q[1]) - (a[0] - q[0]) * (c[1] - q[1])) / det;
-                    let l3 = 1.0 - l1 - l2;
-                    let eps = -1e-9;
-                    if l1 >= eps && l2 >= eps && l3 >= eps {
+                    if let Some([l1, l2, l3]) = crate::gel::barycentric(a, b, c, det, q) {
                         let k = row * cols + col;
                         nodes[k] = t.map(|i| i as u32);
                         weights[k] = [l1 as f32, l2 as f32, l3 as f32];
