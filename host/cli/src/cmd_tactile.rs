@@ -153,6 +153,13 @@ pub enum TactileCommand {
         /// whatever the threshold.
         #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::positive)]
         threshold: Option<Vec<f64>>,
+        /// How the FEM's masks are drawn: 0 is the depth mask (-u_z above 30 um, Ch.6.5.1); a
+        /// positive value is a slope mask, |grad u_z| above it (dimensionless; the camera sees
+        /// the surface's normals, not its depth). A comma-separated list is a set of
+        /// candidates fitted on the even frames with every threshold, tilt and crown (default
+        /// 0; with --fit, the one in its map.json).
+        #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::non_negative)]
+        fem_slope: Option<Vec<f64>>,
         /// Candidate tilts of the indenter about its own x axis, degrees, comma-separated (the
         /// edge indenter's edge runs along its y axis, so this lowers one end of the edge). Each
         /// candidate, crossed with every --roll-deg, is a FEM run of its own (cached beside
@@ -505,6 +512,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             fem,
             steps,
             threshold,
+            fem_slope,
             pitch_deg,
             roll_deg,
             crown_radius_mm,
@@ -524,6 +532,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             fem,
             steps,
             threshold,
+            fem_slope,
             pitch_deg,
             roll_deg,
             crown_radius_mm,
@@ -893,6 +902,7 @@ struct CompareArgs {
     fem: PathBuf,
     steps: usize,
     threshold: Option<Vec<f64>>,
+    fem_slope: Option<Vec<f64>>,
     pitch_deg: Option<Vec<f64>>,
     roll_deg: Option<Vec<f64>>,
     crown_radius_mm: Option<Vec<f64>>,
@@ -972,6 +982,16 @@ fn apex_name(apex: CrownApex) -> String {
 /// Displacement fields of a FEM run, one per step.
 type Fields = Vec<Vec<[f64; 3]>>;
 
+/// The candidate `compare-real` keeps: its shape's index, the real mask's threshold and the
+/// FEM mask's slope (`--fem-slope`), the gel, its fields and the map fitted on them.
+type Kept = (
+    usize,
+    [f64; 2],
+    Gel,
+    Fields,
+    Option<ocm_tactile::real::MaskFit>,
+);
+
 /// The surface layer of `skin_um` um at `ratio` times the body's stiffness; a layer that
 /// changes nothing (no thickness, or the body's stiffness) is written as 0 um at 1.
 fn skin(skin_um: f64, ratio: f64) -> Skin {
@@ -986,6 +1006,16 @@ fn skin(skin_um: f64, ratio: f64) -> Skin {
             thickness_m: 0.0,
             stiffness_ratio: 1.0,
         }
+    }
+}
+
+/// The FEM mask of `--fem-slope` value `slope`: 0 is the depth mask.
+fn mask_rule(slope: f64) -> ocm_tactile::mask::MaskRule {
+    use ocm_tactile::mask::MaskRule;
+    if slope > 0.0 {
+        MaskRule::Slope(slope)
+    } else {
+        MaskRule::Depth
     }
 }
 
@@ -1137,6 +1167,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     // The candidates: as given, else from --fit's map.json, else the defaults.
     let given = [
         &a.threshold,
+        &a.fem_slope,
         &a.pitch_deg,
         &a.roll_deg,
         &a.crown_radius_mm,
@@ -1149,7 +1180,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     .product::<usize>();
     if a.fit.is_some() && given > 1 {
         bail!(
-            "--fit reuses a fitted map: give the tilt, crown, skin, threshold and steps per frame it was fitted with as one --pitch-deg, --roll-deg, --crown-radius-mm, --skin-um, --skin-stiffness, --threshold and --steps-per-frame, or none (got {given} candidates)"
+            "--fit reuses a fitted map: give the tilt, crown, skin, thresholds and steps per frame it was fitted with as one --pitch-deg, --roll-deg, --crown-radius-mm, --skin-um, --skin-stiffness, --threshold, --fem-slope and --steps-per-frame, or none (got {given} candidates)"
         );
     }
     let saved = a.fit.as_deref().map(read_map_json).transpose()?;
@@ -1174,6 +1205,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         real::MaskOptions::default().threshold,
     );
     let rates = or_saved(&a.steps_per_frame, "/steps_per_frame", &[1.0], 1.0);
+    let slopes = or_saved(&a.fem_slope, "/fem_slope", &[0.0], 0.0);
     let tilts: Vec<[f64; 2]> = or_saved(&a.pitch_deg, "/tilt_deg/pitch", &[0.0], 0.0)
         .into_iter()
         .flat_map(|p| {
@@ -1236,7 +1268,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             shapes.extend(skins.iter().map(|&k| (t, c, k)));
         }
     }
-    let candidates = shapes.len() * thresholds.len() * rates.len();
+    let candidates = shapes.len() * thresholds.len() * slopes.len() * rates.len();
     let digit = ocm_datadir::data_file(a.data.as_deref(), "digit")?;
     let frames = real::load_frames(&digit.join("real-frames-edge6"), "edge6")?;
     let bg = frames[0].clone();
@@ -1249,7 +1281,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     // candidate (tilt and mask threshold), the map and step offset are fitted against each on
     // the even frames and the best fit is kept; the odd frames score only the one kept.
     let mut tried = Vec::new();
-    let mut best: Option<(usize, f64, Gel, Fields, Option<real::MaskFit>)> = None;
+    let mut best: Option<Kept> = None;
     let mut best_iou = f64::NEG_INFINITY;
     let mut fem_seconds = Vec::new();
     for (i, &(tilt, crown, skin)) in shapes.iter().enumerate() {
@@ -1267,22 +1299,25 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         let (fields, secs) = edge_fem(&a, &gel, &grid, s, tilt, &dir)?;
         fem_seconds.extend(secs);
         if candidates == 1 {
-            best = Some((i, thresholds[0], gel, fields, None));
+            best = Some((i, [thresholds[0], slopes[0]], gel, fields, None));
             break;
         }
         let mut kept = None;
-        for &threshold in &thresholds {
+        for (&threshold, &slope) in thresholds
+            .iter()
+            .flat_map(|t| slopes.iter().map(move |s| (t, s)))
+        {
             let mask = MaskOptions {
                 threshold,
                 ..MaskOptions::default()
             };
-            let pairs = real::MaskPairs::new(&gel, &fields, &frames, &mask)?;
+            let pairs = real::MaskPairs::new(&gel, &fields, &frames, &mask, mask_rule(slope))?;
             for &rate in &rates {
                 let (lo, hi) = pairs.offsets(CompareOptions::default().offset_window, rate)?;
                 let pb = bar(
                     1,
                     &format!(
-                        "map fit: pitch {} roll {} deg, crown {crown} mm, skin {} um x {}, threshold {threshold}, {rate} steps per frame",
+                        "map fit: pitch {} roll {} deg, crown {crown} mm, skin {} um x {}, threshold {threshold}, FEM slope {slope}, {rate} steps per frame",
                         tilt[0],
                         tilt[1],
                         skin.thickness_m * 1e6,
@@ -1298,6 +1333,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
                     "skin_um": skin.thickness_m * 1e6,
                     "skin_stiffness": skin.stiffness_ratio,
                     "threshold": threshold,
+                    "fem_slope": slope,
                     "steps_per_frame": rate,
                     "fem_cache": dir.display().to_string(),
                     "fit_iou": fit.fit_iou,
@@ -1305,7 +1341,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
                 }));
                 if fit.fit_iou > best_iou {
                     best_iou = fit.fit_iou;
-                    kept = Some((threshold, fit));
+                    kept = Some(([threshold, slope], fit));
                 }
             }
         }
@@ -1313,7 +1349,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             best = Some((i, threshold, gel, fields, Some(fit)));
         }
     }
-    let Some((chosen, threshold, gel, fields, tilt_fit)) = best else {
+    let Some((chosen, [threshold, slope], gel, fields, tilt_fit)) = best else {
         bail!("no tilt candidates");
     };
     // A single candidate is not fitted here: its rate is the one given (or saved).
@@ -1350,6 +1386,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         fixed_fit: fixed_fit.or(tilt_fit),
         px_per_m: a.mm_per_px.map(|v| 1e3 / v),
         steps_per_frame: rate,
+        fem_mask: mask_rule(slope),
         ..CompareOptions::default()
     };
     let calib = PolyCalib::from_npz(digit.join(real::DEFAULT_CALIB))?;
@@ -1404,7 +1441,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             .map(|k| [k.thickness_m * 1e6, k.stiffness_ratio])
             .collect::<Vec<_>>(),
     });
-    let v = serde_json::json!({
+    let mut v = serde_json::json!({
         "setup": s.name,
         "mesh": mesh_file(a.mesh),
         "nodes": gel.num_nodes(),
@@ -1459,6 +1496,8 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         "images": pngs,
         "seconds": t_start.elapsed().as_secs_f64(),
     });
+    // Beside the rest: the macro above is at its recursion limit.
+    v["fem_mask"] = serde_json::json!({"slope": slope, "tried": slopes});
     std::fs::write(
         a.out.join("summary.json"),
         serde_json::to_string_pretty(&v)?,
@@ -1472,6 +1511,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             "steps_per_frame": c.fit.steps_per_frame,
             "fit_iou": c.fit.fit_iou,
             "threshold": threshold,
+            "fem_slope": slope,
             "tilt_deg": {"pitch": tilt[0], "roll": tilt[1]},
             "crown_radius_mm": crown,
             "crown_apex": apex_name(apex),

@@ -206,6 +206,11 @@ fn compare_real_candidates_are_checked_before_any_work() {
         "must be 0 or more",
     );
     refused_flag(
+        &["tactile", "compare-real", "--fem-slope=0.06,-0.1"],
+        "--fem-slope",
+        "must be 0 or more",
+    );
+    refused_flag(
         &["tactile", "compare-real", "--skin-stiffness=3,0"],
         "--skin-stiffness",
         "must be greater than 0",
@@ -228,6 +233,7 @@ fn compare_real_candidates_are_checked_before_any_work() {
         ("--crown-radius-mm=0,20", 2),
         ("--steps-per-frame=1,1.2", 2),
         ("--skin-stiffness=3,10", 2),
+        ("--fem-slope=0,0.06,0.1", 3),
     ] {
         let e = fails(&[
             "tactile",

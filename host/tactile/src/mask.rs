@@ -83,6 +83,59 @@ pub fn rasterize(gel: &Gel, grid: &Grid, nodal: &[f64]) -> Vec<f64> {
     img
 }
 
+/// Which field of the top face a FEM contact mask thresholds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum MaskRule {
+    /// The downward displacement -u_z above [`CONTACT_THRESHOLD_M`] (Ch.6.5.1).
+    Depth,
+    /// The slope of the downward displacement, |grad u_z| (dimensionless), above this value.
+    /// A DIGIT camera sees the change of the surface normal, not of the depth: this is the
+    /// FEM's counterpart of a mask measured on camera frames (see the tactile README).
+    Slope(f64),
+}
+
+impl MaskRule {
+    /// The contact mask of one FEM step under this rule: thresholded on `grid`, closed with a
+    /// [`CLOSING_KERNEL_PX`] square and with holes filled.
+    pub fn mask(&self, gel: &Gel, grid: &Grid, displacement: &[[f64; 3]]) -> Mask {
+        let down: Vec<f64> = displacement.iter().map(|u| -u[2]).collect();
+        let img = rasterize(gel, grid, &down);
+        let pixels = match *self {
+            MaskRule::Depth => img.iter().map(|&v| v > CONTACT_THRESHOLD_M).collect(),
+            MaskRule::Slope(t) => slope_image(&img, grid).iter().map(|&g| g > t).collect(),
+        };
+        Mask {
+            grid: *grid,
+            pixels,
+        }
+        .closed(CLOSING_KERNEL_PX)
+        .filled()
+    }
+}
+
+/// |grad f| of a row-major image on `grid` by central differences (one-sided at the border).
+pub fn slope_image(img: &[f64], grid: &Grid) -> Vec<f64> {
+    let (rows, cols) = (grid.rows, grid.cols);
+    let diff = |lo: usize, hi: usize, a: f64, b: f64| {
+        if hi > lo {
+            (b - a) / ((hi - lo) as f64 * grid.pixel_m)
+        } else {
+            0.0
+        }
+    };
+    let mut out = vec![0.0; rows * cols];
+    for r in 0..rows {
+        let (r0, r1) = (r.saturating_sub(1), (r + 1).min(rows - 1));
+        for c in 0..cols {
+            let (c0, c1) = (c.saturating_sub(1), (c + 1).min(cols - 1));
+            let gx = diff(c0, c1, img[r * cols + c0], img[r * cols + c1]);
+            let gy = diff(r0, r1, img[r0 * cols + c], img[r1 * cols + c]);
+            out[r * cols + c] = gx.hypot(gy);
+        }
+    }
+    out
+}
+
 /// A binary mask on a grid with its shape statistics.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Mask {
@@ -107,13 +160,14 @@ impl Mask {
     /// Contact mask of a step: -u_z of the top face above [`CONTACT_THRESHOLD_M`], closed with a
     /// [`CLOSING_KERNEL_PX`] square and with holes filled.
     pub fn from_displacement(gel: &Gel, grid: &Grid, displacement: &[[f64; 3]]) -> Self {
-        let down: Vec<f64> = displacement.iter().map(|u| -u[2]).collect();
-        let img = rasterize(gel, grid, &down);
-        let raw = Mask {
-            grid: *grid,
-            pixels: img.iter().map(|&v| v > CONTACT_THRESHOLD_M).collect(),
-        };
-        raw.closed(CLOSING_KERNEL_PX).filled()
+        MaskRule::Depth.mask(gel, grid, displacement)
+    }
+
+    /// Contact mask of a step as a camera that sees surface normals would draw it: the slope
+    /// of the top face's downward displacement, |grad u_z|, above `slope`, closed and filled
+    /// like [`Mask::from_displacement`].
+    pub fn from_slope(gel: &Gel, grid: &Grid, displacement: &[[f64; 3]], slope: f64) -> Self {
+        MaskRule::Slope(slope).mask(gel, grid, displacement)
     }
 
     /// Number of set pixels.
@@ -327,6 +381,65 @@ mod tests {
         assert!((s.centroid_m[0] - 90.0).abs() < 0.5 && (s.centroid_m[1] - 110.0).abs() < 0.5);
         assert!((s.angle_rad - th).abs() < 0.01, "{}", s.angle_rad);
         assert!((s.area_m2 - 120.0 * 30.0).abs() < 0.03 * 3600.0);
+    }
+
+    /// The slope mask of a bowl u_z = -c (R^2 - r^2) (slope 2 c r) is the annulus where 2 c r
+    /// passes the threshold, filled to the bowl's disc; above the rim's slope 2 c R it is
+    /// empty, and a depth mask of the same bowl is the disc where the depth passes 30 um.
+    #[test]
+    fn slope_mask_of_a_bowl() {
+        let mesh = ocm_fem::mesh::generate::box_mesh([60, 60, 1], [12e-3, 12e-3, 2e-3]);
+        let gel = Gel::from_mesh(mesh, crate::gel::GelMaterial::default(), 1e-9).unwrap();
+        let grid = Grid::for_gel(&gel);
+        let (c, rr) = (40.0, 4e-3); // 1/m, m: 0.64 mm deep at the centre, rim slope 0.32
+        let u: Vec<[f64; 3]> = gel
+            .mesh
+            .points
+            .iter()
+            .map(|p| {
+                let r2 = (p[0] - 6e-3).powi(2) + (p[1] - 6e-3).powi(2);
+                [0.0, 0.0, -c * (rr * rr - r2).max(0.0)]
+            })
+            .collect();
+        let disc = std::f64::consts::PI * rr * rr;
+        // A slope of 0.2 is reached at r = 2.5 mm: the raw mask is a ring 1.5 mm wide.
+        let m = Mask::from_slope(&gel, &grid, &u, 0.2);
+        let s = m.stats();
+        assert!(
+            (s.area_m2 / disc - 1.0).abs() < 0.03,
+            "{} of {disc}",
+            s.area_m2
+        );
+        assert!((s.centroid_m[0] - 6e-3).abs() < 0.1e-3 && (s.centroid_m[1] - 6e-3).abs() < 0.1e-3);
+        assert!(
+            !Mask::from_slope(&gel, &grid, &u, 0.35)
+                .pixels
+                .iter()
+                .any(|&b| b)
+        );
+        // The depth mask: c (R^2 - r^2) > 30 um inside r^2 < R^2 - 30e-6 / c.
+        let depth = Mask::from_displacement(&gel, &grid, &u).stats().area_m2;
+        let want = std::f64::consts::PI * (rr * rr - 30e-6 / c);
+        assert!((depth / want - 1.0).abs() < 0.03, "{depth} against {want}");
+        // The slope image itself: 2 c r at r = 3 mm, to a pixel's worth of interpolation.
+        let down: Vec<f64> = u.iter().map(|v| -v[2]).collect();
+        let g = slope_image(&rasterize(&gel, &grid, &down), &grid);
+        let at = |x: f64, y: f64| {
+            let (col, row) = ((x / grid.pixel_m) as usize, (y / grid.pixel_m) as usize);
+            g[row * grid.cols + col]
+        };
+        let want = 2.0 * c * 3e-3;
+        assert!(
+            (at(9e-3, 6e-3) / want - 1.0).abs() < 0.05,
+            "{}",
+            at(9e-3, 6e-3)
+        );
+        assert!(
+            (at(6e-3, 3e-3) / want - 1.0).abs() < 0.05,
+            "{}",
+            at(6e-3, 3e-3)
+        );
+        assert!(at(1e-3, 1e-3) == 0.0, "flat outside the bowl");
     }
 
     /// Closing bridges a gap narrower than the kernel, keeps a wide one, and filling closes a ring.

@@ -4,7 +4,7 @@
 //! then frames rendered from the FEM against the real frames.
 
 use crate::gel::Gel;
-use crate::mask::{CLOSING_KERNEL_PX, Grid, Mask, mask_from_fn};
+use crate::mask::{CLOSING_KERNEL_PX, Grid, Mask, MaskRule, mask_from_fn};
 use crate::metrics;
 use crate::optics::render::IDENTITY_COLOUR;
 use crate::optics::{CameraMap, Renderer, RgbImage, SurfaceSampler};
@@ -804,13 +804,10 @@ pub fn read_cached_steps(dir: &Path, steps: usize, nodes: usize) -> Option<Vec<V
         .collect()
 }
 
-/// The gel-grid FEM masks of each step.
-pub fn fem_masks(gel: &Gel, steps: &[Vec<[f64; 3]>]) -> Vec<Mask> {
+/// The gel-grid FEM masks of each step under `rule`.
+pub fn fem_masks(gel: &Gel, steps: &[Vec<[f64; 3]>], rule: MaskRule) -> Vec<Mask> {
     let grid = Grid::for_gel(gel);
-    steps
-        .iter()
-        .map(|u| Mask::from_displacement(gel, &grid, u))
-        .collect()
+    steps.iter().map(|u| rule.mask(gel, &grid, u)).collect()
 }
 
 /// Which optical parameters `compare` fits on the fitting frames (beside the smoothing).
@@ -842,6 +839,8 @@ pub struct CompareOptions {
     pub px_per_m: Option<f64>,
     /// FEM steps per real frame in the map fit ([`MaskFit::steps_per_frame`]).
     pub steps_per_frame: f64,
+    /// How the FEM's masks are drawn (the depth of Ch.6.5.1 by default).
+    pub fem_mask: MaskRule,
 }
 
 impl Default for CompareOptions {
@@ -854,6 +853,7 @@ impl Default for CompareOptions {
             fixed_fit: None,
             px_per_m: None,
             steps_per_frame: 1.0,
+            fem_mask: MaskRule::Depth,
         }
     }
 }
@@ -975,12 +975,13 @@ pub struct MaskPairs {
 
 impl MaskPairs {
     /// Masks of `frames` (frame 0 the background) measured with `mask`, and of the FEM's
-    /// `fields` (10 um apart).
+    /// `fields` (10 um apart) drawn by `rule`.
     pub fn new(
         gel: &Gel,
         fields: &[Vec<[f64; 3]>],
         frames: &[RgbImage],
         mask: &MaskOptions,
+        rule: MaskRule,
     ) -> Result<MaskPairs> {
         let Some(bg) = frames.first() else {
             return Err(TactileError::Input("no real frames".into()));
@@ -992,7 +993,7 @@ impl MaskPairs {
         let n = frames.len();
         Ok(MaskPairs {
             real,
-            fem: fem_masks(gel, fields),
+            fem: fem_masks(gel, fields, rule),
             fit_frames: (1..n).filter(|k| k % 2 == 0).collect(),
             score_frames: (1..n).filter(|k| k % 2 == 1).collect(),
             mask: *mask,
@@ -1034,7 +1035,7 @@ impl MaskPairs {
                 c > 0 && c as f64 >= FIRST_CONTACT_SHARE * fem_largest as f64
             })
             .ok_or_else(|| {
-                TactileError::Input("the FEM never reaches the 30 um mask threshold".into())
+                TactileError::Input("no FEM step reaches the FEM mask's threshold".into())
             })?
             + 1;
         let centre = k0.saturating_sub((j0 as f64 / steps_per_frame).round() as usize);
@@ -1078,7 +1079,7 @@ pub fn compare(
 ) -> Result<Comparison> {
     let bg = &frames[0];
     progress("fitting the gel-to-image map");
-    let pairs = MaskPairs::new(gel, fields, frames, &opts.mask)?;
+    let pairs = MaskPairs::new(gel, fields, frames, &opts.mask, opts.fem_mask)?;
     let (lo, hi) = pairs.offsets(opts.offset_window, opts.steps_per_frame)?;
     let fit = match opts.fixed_fit {
         Some(f) => f,
@@ -1225,7 +1226,7 @@ pub fn write_figures(
         Some(u) => {
             let grid = Grid::for_gel(gel);
             warp_mask(
-                &Mask::from_displacement(gel, &grid, u),
+                &opts.fem_mask.mask(gel, &grid, u),
                 &c.fit.map,
                 bg.rows,
                 bg.cols,
