@@ -1551,7 +1551,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         println!(
-            "{} on {}: map {:.4} mm/px, angle {:.3} rad, mirror {}, offset {} frames, {} steps per frame (fit IoU {:.3}); masks on the odd frames: IoU median {:.3} (goal 0.85), centroid {:.3} mm, rotation {:.3} rad; rendered (gain {:.2}): contact-region SSIM median {:.3} (goal 0.93), L1 {:.2}, PSNR {:.1} dB, mask IoU {:.3}; files in {}",
+            "{} on {}: map {:.4} mm/px, angle {:.3} rad, mirror {}, offset {} frames, {} steps per frame, FEM mask {} (fit IoU {:.3}); masks on the odd frames: IoU median {:.3} (goal 0.85), centroid {:.3} mm, rotation {:.3} rad; rendered (gain {:.2}): contact-region SSIM median {:.3} (goal 0.93), L1 {:.2}, PSNR {:.1} dB, mask IoU {:.3}; files in {}",
             s.name,
             mesh_file(a.mesh),
             1e3 / c.fit.map.px_per_m,
@@ -1559,6 +1559,10 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             c.fit.map.mirror,
             c.fit.offset_steps,
             c.fit.steps_per_frame,
+            match mask_rule(slope) {
+                ocm_tactile::mask::MaskRule::Depth => "-u_z > 30 um".to_string(),
+                ocm_tactile::mask::MaskRule::Slope(t) => format!("|grad u_z| > {t}"),
+            },
             c.fit.fit_iou,
             median(&ious),
             median(&cens),

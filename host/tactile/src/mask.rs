@@ -163,13 +163,6 @@ impl Mask {
         MaskRule::Depth.mask(gel, grid, displacement)
     }
 
-    /// Contact mask of a step as a camera that sees surface normals would draw it: the slope
-    /// of the top face's downward displacement, |grad u_z|, above `slope`, closed and filled
-    /// like [`Mask::from_displacement`].
-    pub fn from_slope(gel: &Gel, grid: &Grid, displacement: &[[f64; 3]], slope: f64) -> Self {
-        MaskRule::Slope(slope).mask(gel, grid, displacement)
-    }
-
     /// Number of set pixels.
     pub fn count(&self) -> usize {
         self.pixels.iter().filter(|&&b| b).count()
@@ -403,7 +396,7 @@ mod tests {
             .collect();
         let disc = std::f64::consts::PI * rr * rr;
         // A slope of 0.2 is reached at r = 2.5 mm: the raw mask is a ring 1.5 mm wide.
-        let m = Mask::from_slope(&gel, &grid, &u, 0.2);
+        let m = MaskRule::Slope(0.2).mask(&gel, &grid, &u);
         let s = m.stats();
         assert!(
             (s.area_m2 / disc - 1.0).abs() < 0.03,
@@ -412,7 +405,8 @@ mod tests {
         );
         assert!((s.centroid_m[0] - 6e-3).abs() < 0.1e-3 && (s.centroid_m[1] - 6e-3).abs() < 0.1e-3);
         assert!(
-            !Mask::from_slope(&gel, &grid, &u, 0.35)
+            !MaskRule::Slope(0.35)
+                .mask(&gel, &grid, &u)
                 .pixels
                 .iter()
                 .any(|&b| b)
