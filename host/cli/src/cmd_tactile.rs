@@ -1281,6 +1281,21 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     // candidate (tilt and mask threshold), the map and step offset are fitted against each on
     // the even frames and the best fit is kept; the odd frames score only the one kept.
     let mut tried = Vec::new();
+    // The real masks of each threshold, measured once for every shape and FEM mask rule.
+    let real_masks: Vec<Vec<ocm_tactile::mask::Mask>> = if candidates == 1 {
+        Vec::new()
+    } else {
+        thresholds
+            .iter()
+            .map(|&threshold| {
+                let mask = MaskOptions {
+                    threshold,
+                    ..MaskOptions::default()
+                };
+                real::measured_masks(&frames, &mask)
+            })
+            .collect::<Result<_, _>>()?
+    };
     let mut best: Option<Kept> = None;
     let mut best_iou = f64::NEG_INFINITY;
     let mut fem_seconds = Vec::new();
@@ -1303,15 +1318,20 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             break;
         }
         let mut kept = None;
-        for (&threshold, &slope) in thresholds
+        let fem_masks: Vec<Vec<ocm_tactile::mask::Mask>> = slopes
             .iter()
-            .flat_map(|t| slopes.iter().map(move |s| (t, s)))
+            .map(|&sl| real::fem_masks(&gel, &fields, mask_rule(sl)))
+            .collect();
+        for ((&threshold, real_masks), (&slope, fem)) in thresholds
+            .iter()
+            .zip(&real_masks)
+            .flat_map(|t| slopes.iter().zip(&fem_masks).map(move |s| (t, s)))
         {
             let mask = MaskOptions {
                 threshold,
                 ..MaskOptions::default()
             };
-            let pairs = real::MaskPairs::new(&gel, &fields, &frames, &mask, mask_rule(slope))?;
+            let pairs = real::MaskPairs::from_masks(real_masks.clone(), fem.clone(), mask);
             for &rate in &rates {
                 let (lo, hi) = pairs.offsets(CompareOptions::default().offset_window, rate)?;
                 let pb = bar(
@@ -1559,10 +1579,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             c.fit.map.mirror,
             c.fit.offset_steps,
             c.fit.steps_per_frame,
-            match mask_rule(slope) {
-                ocm_tactile::mask::MaskRule::Depth => "-u_z > 30 um".to_string(),
-                ocm_tactile::mask::MaskRule::Slope(t) => format!("|grad u_z| > {t}"),
-            },
+            mask_rule(slope),
             c.fit.fit_iou,
             median(&ious),
             median(&cens),

@@ -94,6 +94,15 @@ pub enum MaskRule {
     Slope(f64),
 }
 
+impl std::fmt::Display for MaskRule {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            MaskRule::Depth => write!(f, "-u_z > {} um", CONTACT_THRESHOLD_M * 1e6),
+            MaskRule::Slope(t) => write!(f, "|grad u_z| > {t}"),
+        }
+    }
+}
+
 impl MaskRule {
     /// The contact mask of one FEM step under this rule: thresholded on `grid`, closed with a
     /// [`CLOSING_KERNEL_PX`] square and with holes filled.

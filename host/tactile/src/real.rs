@@ -804,6 +804,14 @@ pub fn read_cached_steps(dir: &Path, steps: usize, nodes: usize) -> Option<Vec<V
         .collect()
 }
 
+/// The measured mask of each of `frames` against frame 0, the background (itself empty).
+pub fn measured_masks(frames: &[RgbImage], mask: &MaskOptions) -> Result<Vec<Mask>> {
+    let Some(bg) = frames.first() else {
+        return Err(TactileError::Input("no real frames".into()));
+    };
+    frames.iter().map(|f| measured_mask(f, bg, mask)).collect()
+}
+
 /// The gel-grid FEM masks of each step under `rule`.
 pub fn fem_masks(gel: &Gel, steps: &[Vec<[f64; 3]>], rule: MaskRule) -> Vec<Mask> {
     let grid = Grid::for_gel(gel);
@@ -983,21 +991,25 @@ impl MaskPairs {
         mask: &MaskOptions,
         rule: MaskRule,
     ) -> Result<MaskPairs> {
-        let Some(bg) = frames.first() else {
-            return Err(TactileError::Input("no real frames".into()));
-        };
-        let real: Vec<Mask> = frames
-            .iter()
-            .map(|f| measured_mask(f, bg, mask))
-            .collect::<Result<_>>()?;
-        let n = frames.len();
-        Ok(MaskPairs {
+        Ok(MaskPairs::from_masks(
+            measured_masks(frames, mask)?,
+            fem_masks(gel, fields, rule),
+            *mask,
+        ))
+    }
+
+    /// Pairs of masks measured before: `real` (one per frame, frame 0 the background) by
+    /// [`measured_masks`] with `mask`, `fem` by [`fem_masks`]; so that candidates sharing a
+    /// threshold or a FEM mask rule measure each once.
+    pub fn from_masks(real: Vec<Mask>, fem: Vec<Mask>, mask: MaskOptions) -> MaskPairs {
+        let n = real.len();
+        MaskPairs {
             real,
-            fem: fem_masks(gel, fields, rule),
+            fem,
             fit_frames: (1..n).filter(|k| k % 2 == 0).collect(),
             score_frames: (1..n).filter(|k| k % 2 == 1).collect(),
-            mask: *mask,
-        })
+            mask,
+        }
     }
 
     /// The step offsets worth trying: `window` on each side of the first real fitting frame
