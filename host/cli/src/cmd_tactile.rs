@@ -154,10 +154,10 @@ pub enum TactileCommand {
         #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::positive)]
         threshold: Option<Vec<f64>>,
         /// How the FEM's masks are drawn: 0 is the depth mask (-u_z above 30 um, Ch.6.5.1); a
-        /// positive value is a slope mask, |grad u_z| above it (dimensionless; the camera sees
-        /// the surface's normals, not its depth). A comma-separated list is a set of
-        /// candidates fitted on the even frames with every threshold, tilt and crown (default
-        /// 0; with --fit, the one in its map.json).
+        /// positive value is a slope mask, |grad u_z| after the real masks' 5 x 5 box blur above
+        /// it (dimensionless; the camera sees the surface's normals, not its depth). A
+        /// comma-separated list is a set of candidates fitted on the even frames with every
+        /// threshold, tilt and crown (default 0; with --fit, the one in its map.json).
         #[arg(long, value_delimiter = ',', value_parser = crate::arg_check::non_negative)]
         fem_slope: Option<Vec<f64>>,
         /// Candidate tilts of the indenter about its own x axis, degrees, comma-separated (the

@@ -1,19 +1,15 @@
 //! `ocm track` end to end: the virtual lab's summary, determinism and logs.
 
+mod common;
+
 use std::process::Command;
 
 fn track(args: &[&str]) -> serde_json::Value {
-    let out = Command::new(env!("CARGO_BIN_EXE_ocm"))
-        .arg("track")
-        .args(args)
-        .output()
-        .expect("the ocm binary runs");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("one JSON summary")
+    common::json_summary(
+        Command::new(env!("CARGO_BIN_EXE_ocm"))
+            .arg("track")
+            .args(args),
+    )
 }
 
 /// Runs `ocm track ARGS`, which must fail, and returns its standard error.

@@ -23,6 +23,10 @@ pub struct Grid {
 pub const CONTACT_THRESHOLD_M: f64 = 30e-6;
 /// Side of the square closing kernel, pixels (Ch.6.5.1: 15 x 15).
 pub const CLOSING_KERNEL_PX: usize = 15;
+/// Radius of the box blur a mask of camera frames sees, pixels: the real frame's change
+/// against the background is blurred over 5 x 5 pixels (JPEG and sensor noise), and the FEM's
+/// slope image, on a grid at the camera's resolution, goes through the same blur.
+pub const BLUR_RADIUS_PX: usize = 2;
 
 impl Grid {
     /// The gel's top face at the DIGIT camera's resolution: 240 x 320 pixels over 15 x 20 mm
@@ -88,9 +92,10 @@ pub fn rasterize(gel: &Gel, grid: &Grid, nodal: &[f64]) -> Vec<f64> {
 pub enum MaskRule {
     /// The downward displacement -u_z above [`CONTACT_THRESHOLD_M`] (Ch.6.5.1).
     Depth,
-    /// The slope of the downward displacement, |grad u_z| (dimensionless), above this value.
-    /// A DIGIT camera sees the change of the surface normal, not of the depth: this is the
-    /// FEM's counterpart of a mask measured on camera frames (see the tactile README).
+    /// The slope of the downward displacement, |grad u_z| (dimensionless) box-blurred like a
+    /// real frame's change ([`BLUR_RADIUS_PX`]), above this value. A DIGIT camera sees the
+    /// change of the surface normal, not of the depth: this is the FEM's counterpart of a mask
+    /// measured on camera frames (see the tactile README).
     Slope(f64),
 }
 
@@ -98,7 +103,11 @@ impl std::fmt::Display for MaskRule {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             MaskRule::Depth => write!(f, "-u_z > {} um", CONTACT_THRESHOLD_M * 1e6),
-            MaskRule::Slope(t) => write!(f, "|grad u_z| > {t}"),
+            MaskRule::Slope(t) => write!(
+                f,
+                "|grad u_z| ({0} x {0} box blur) > {t}",
+                2 * BLUR_RADIUS_PX + 1
+            ),
         }
     }
 }
@@ -111,7 +120,7 @@ impl MaskRule {
         let img = rasterize(gel, grid, &down);
         let pixels = match *self {
             MaskRule::Depth => img.iter().map(|&v| v > CONTACT_THRESHOLD_M).collect(),
-            MaskRule::Slope(t) => slope_image(&img, grid).iter().map(|&g| g > t).collect(),
+            MaskRule::Slope(t) => slope_pixels(&img, grid, t),
         };
         Mask {
             grid: *grid,
@@ -120,6 +129,67 @@ impl MaskRule {
         .closed(CLOSING_KERNEL_PX)
         .filled()
     }
+}
+
+/// The pixels of a slope mask before closing: |grad img| ([`slope_image`]) box-blurred over
+/// [`BLUR_RADIUS_PX`], above `min_slope`.
+pub fn slope_pixels(img: &[f64], grid: &Grid, min_slope: f64) -> Vec<bool> {
+    box_blur(
+        &slope_image(img, grid),
+        grid.rows,
+        grid.cols,
+        BLUR_RADIUS_PX,
+    )
+    .iter()
+    .map(|&g| g > min_slope)
+    .collect()
+}
+
+/// Mean over the (2 r + 1) x (2 r + 1) square about each pixel of a row-major image, the
+/// square clipped at the border (separable running sums); r = 0 is the identity.
+pub fn box_blur(src: &[f64], rows: usize, cols: usize, r: usize) -> Vec<f64> {
+    let mean = |sum: f64, n: usize| sum / n as f64;
+    let a = window_pass(src, rows, cols, r, true, |v| v, mean);
+    window_pass(&a, rows, cols, r, false, |v| v, mean)
+}
+
+/// One separable pass of a running window of radius `r` along the rows (or the columns) of a
+/// row-major image: `out(sum, count)` of `value` over each pixel's window, clipped at the
+/// border (prefix sums; counts of bools stay exact in f64).
+fn window_pass<T: Copy, O: Copy + Default>(
+    src: &[T],
+    rows: usize,
+    cols: usize,
+    r: usize,
+    along_rows: bool,
+    value: impl Fn(T) -> f64,
+    out: impl Fn(f64, usize) -> O,
+) -> Vec<O> {
+    let (lines, len) = if along_rows {
+        (rows, cols)
+    } else {
+        (cols, rows)
+    };
+    let idx = |l: usize, k: usize| {
+        if along_rows {
+            l * cols + k
+        } else {
+            k * cols + l
+        }
+    };
+    let mut res = vec![O::default(); src.len()];
+    let mut prefix = vec![0.0; len + 1];
+    for l in 0..lines {
+        for k in 0..len {
+            prefix[k + 1] = prefix[k] + value(src[idx(l, k)]);
+        }
+        for k in 0..len {
+            let lo = k.saturating_sub(r);
+            let hi = (k + r + 1).min(len);
+            res[idx(l, k)] = out(prefix[hi] - prefix[lo], hi - lo);
+        }
+    }
+    res
 }
 
 /// |grad f| of a row-major image on `grid` by central differences (one-sided at the border).
@@ -312,37 +382,10 @@ pub fn principal_angle(mxx: f64, myy: f64, mxy: f64) -> f64 {
 /// Square max (dilate) or min (erode) filter of radius r, separable; the erosion sees the
 /// outside as set.
 fn filter(px: &[bool], rows: usize, cols: usize, r: usize, dilate: bool) -> Vec<bool> {
-    let pass = |src: &[bool], along_rows: bool| -> Vec<bool> {
-        let mut out = vec![false; src.len()];
-        let (n_lines, len) = if along_rows {
-            (rows, cols)
-        } else {
-            (cols, rows)
-        };
-        let idx = |line: usize, k: usize| {
-            if along_rows {
-                line * cols + k
-            } else {
-                k * cols + line
-            }
-        };
-        for line in 0..n_lines {
-            // Running count of set pixels in the window.
-            let mut prefix = vec![0usize; len + 1];
-            for k in 0..len {
-                prefix[k + 1] = prefix[k] + usize::from(src[idx(line, k)]);
-            }
-            for k in 0..len {
-                let lo = k.saturating_sub(r);
-                let hi = (k + r + 1).min(len);
-                let set = prefix[hi] - prefix[lo];
-                out[idx(line, k)] = if dilate { set > 0 } else { set == hi - lo };
-            }
-        }
-        out
-    };
-    let a = pass(px, true);
-    pass(&a, false)
+    let count = |b: bool| f64::from(u8::from(b));
+    let keep = |set: f64, n: usize| if dilate { set > 0.0 } else { set == n as f64 };
+    let a = window_pass(px, rows, cols, r, true, count, keep);
+    window_pass(&a, rows, cols, r, false, count, keep)
 }
 
 /// A mask from explicit pixels (tests and measured masks).
@@ -443,6 +486,48 @@ mod tests {
             at(6e-3, 3e-3)
         );
         assert!(at(1e-3, 1e-3) == 0.0, "flat outside the bowl");
+    }
+
+    /// A ramp of slope s across w columns: central differences give s on its inner columns and
+    /// s / 2 on the two at its ends, 3 s in all for w = 3, so the 5 x 5 blur leaves at most
+    /// 3 s / 5 of a ramp narrower than itself, as it leaves of a real frame's change; a ramp 12
+    /// columns wide keeps s at its middle.
+    #[test]
+    fn slope_pixels_see_the_blur_of_real_frames() {
+        assert_eq!(BLUR_RADIUS_PX, 2);
+        let g = Grid {
+            origin_m: [0.0, 0.0],
+            pixel_m: 1e-4,
+            cols: 60,
+            rows: 20,
+        };
+        let s = 0.1;
+        let ramp = |w: f64| -> Vec<f64> {
+            (0..g.rows * g.cols)
+                .map(|i| s * g.pixel_m * ((i % g.cols) as f64 - 20.0).clamp(0.0, w))
+                .collect()
+        };
+        let raw = |img: &[f64], t: f64| slope_image(img, &g).iter().any(|&v| v > t);
+        let any = |px: Vec<bool>| px.iter().any(|&b| b);
+        let narrow = ramp(3.0);
+        assert!(raw(&narrow, 0.07), "unblurred, the narrow ramp passes 0.07");
+        assert!(
+            !any(slope_pixels(&narrow, &g, 0.061)),
+            "blurred: 3 s / 5 = 0.06"
+        );
+        assert!(any(slope_pixels(&narrow, &g, 0.059)));
+        let blurred = box_blur(&slope_image(&narrow, &g), g.rows, g.cols, BLUR_RADIUS_PX);
+        let peak = blurred.iter().cloned().fold(0.0, f64::max);
+        assert!((peak - 0.6 * s).abs() < 1e-12, "{peak}");
+        let wide = slope_pixels(&ramp(12.0), &g, 0.099);
+        assert!(wide[10 * g.cols + 26] && !wide[10 * g.cols + 10]);
+        let count = wide.iter().filter(|&&b| b).count();
+        // Columns 23..=29: their 5-column windows hold only the ramp's inner columns 21..=31.
+        assert_eq!(
+            count,
+            7 * g.rows,
+            "the wide ramp's columns whose window is all slope s"
+        );
     }
 
     /// Closing bridges a gap narrower than the kernel, keeps a wide one, and filling closes a ring.

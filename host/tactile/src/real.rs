@@ -4,7 +4,9 @@
 //! then frames rendered from the FEM against the real frames.
 
 use crate::gel::Gel;
-use crate::mask::{CLOSING_KERNEL_PX, Grid, Mask, MaskRule, mask_from_fn};
+use crate::mask::{
+    BLUR_RADIUS_PX, CLOSING_KERNEL_PX, Grid, Mask, MaskRule, box_blur, mask_from_fn,
+};
 use crate::metrics;
 use crate::optics::render::IDENTITY_COLOUR;
 use crate::optics::{CameraMap, Renderer, RgbImage, SurfaceSampler};
@@ -76,7 +78,7 @@ impl Default for MaskOptions {
     fn default() -> Self {
         MaskOptions {
             threshold: 10.0,
-            blur_radius_px: 2,
+            blur_radius_px: BLUR_RADIUS_PX,
         }
     }
 }
@@ -102,41 +104,6 @@ pub fn change_image(frame: &RgbImage, bg: &RgbImage, blur_radius_px: usize) -> R
         })
         .collect();
     Ok(box_blur(&d, rows, cols, blur_radius_px))
-}
-
-fn box_blur(src: &[f64], rows: usize, cols: usize, r: usize) -> Vec<f64> {
-    if r == 0 {
-        return src.to_vec();
-    }
-    let pass = |src: &[f64], along_rows: bool| -> Vec<f64> {
-        let (lines, len) = if along_rows {
-            (rows, cols)
-        } else {
-            (cols, rows)
-        };
-        let idx = |l: usize, k: usize| {
-            if along_rows {
-                l * cols + k
-            } else {
-                k * cols + l
-            }
-        };
-        let mut out = vec![0.0; src.len()];
-        let mut prefix = vec![0.0; len + 1];
-        for l in 0..lines {
-            for k in 0..len {
-                prefix[k + 1] = prefix[k] + src[idx(l, k)];
-            }
-            for k in 0..len {
-                let lo = k.saturating_sub(r);
-                let hi = (k + r + 1).min(len);
-                out[idx(l, k)] = (prefix[hi] - prefix[lo]) / (hi - lo) as f64;
-            }
-        }
-        out
-    };
-    let a = pass(src, true);
-    pass(&a, false)
 }
 
 /// The measured contact mask of a real frame: the blurred change against the background above
