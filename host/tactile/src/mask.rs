@@ -148,6 +148,10 @@ pub fn slope_pixels(img: &[f64], grid: &Grid, min_slope: f64) -> Vec<bool> {
 /// Mean over the (2 r + 1) x (2 r + 1) square about each pixel of a row-major image, the
 /// square clipped at the border (separable running sums); r = 0 is the identity.
 pub fn box_blur(src: &[f64], rows: usize, cols: usize, r: usize) -> Vec<f64> {
+    if r == 0 {
+        // Differences of prefix sums would only round to the pixels.
+        return src.to_vec();
+    }
     let mean = |sum: f64, n: usize| sum / n as f64;
     let a = window_pass(src, rows, cols, r, true, |v| v, mean);
     window_pass(&a, rows, cols, r, false, |v| v, mean)
