@@ -1288,10 +1288,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
         thresholds
             .iter()
             .map(|&threshold| {
-                let mask = MaskOptions {
-                    threshold,
-                    ..MaskOptions::default()
-                };
+                let mask = MaskOptions { threshold };
                 real::measured_masks(&frames, &mask)
             })
             .collect::<Result<_, _>>()?
@@ -1327,10 +1324,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
             .zip(&real_masks)
             .flat_map(|t| slopes.iter().zip(&fem_masks).map(move |s| (t, s)))
         {
-            let mask = MaskOptions {
-                threshold,
-                ..MaskOptions::default()
-            };
+            let mask = MaskOptions { threshold };
             let pairs = real::MaskPairs::from_masks(real_masks.clone(), fem.clone(), mask);
             for &rate in &rates {
                 let (lo, hi) = pairs.offsets(CompareOptions::default().offset_window, rate)?;
@@ -1375,10 +1369,7 @@ fn compare_real(a: CompareArgs) -> anyhow::Result<()> {
     // A single candidate is not fitted here: its rate is the one given (or saved).
     let rate = tilt_fit.map_or(rates[0], |f| f.steps_per_frame);
     let (tilt, crown, skin) = shapes[chosen];
-    let mask_opts = MaskOptions {
-        threshold,
-        ..MaskOptions::default()
-    };
+    let mask_opts = MaskOptions { threshold };
     let fixed_fit = match (&a.fit, &saved) {
         (Some(p), Some(v)) => Some(real::MaskFit {
             map: serde_json::from_value(v.get("map").cloned().unwrap_or_default())

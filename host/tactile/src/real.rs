@@ -68,23 +68,19 @@ pub fn image_grid(rows: usize, cols: usize) -> Grid {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct MaskOptions {
     /// Change against the background above which a pixel is in contact: the mean over R, G, B
-    /// of |frame - background| after a box blur, grey levels.
+    /// of |frame - background| after the box blur of [`BLUR_RADIUS_PX`], grey levels.
     pub threshold: f64,
-    /// Radius of the box blur applied to the change, pixels (JPEG and sensor noise).
-    pub blur_radius_px: usize,
 }
 
 impl Default for MaskOptions {
     fn default() -> Self {
-        MaskOptions {
-            threshold: 10.0,
-            blur_radius_px: BLUR_RADIUS_PX,
-        }
+        MaskOptions { threshold: 10.0 }
     }
 }
 
-/// Mean absolute change over the channels, box-blurred (separable running sums).
-pub fn change_image(frame: &RgbImage, bg: &RgbImage, blur_radius_px: usize) -> Result<Vec<f64>> {
+/// Mean absolute change over the channels, box-blurred over [`BLUR_RADIUS_PX`] (JPEG and sensor
+/// noise; the FEM's slope masks see the same blur).
+pub fn change_image(frame: &RgbImage, bg: &RgbImage) -> Result<Vec<f64>> {
     if (frame.rows, frame.cols) != (bg.rows, bg.cols) || frame.data.len() != bg.data.len() {
         return Err(TactileError::Input(format!(
             "frame is {} x {} but the background is {} x {} (cols x rows)",
@@ -103,7 +99,7 @@ pub fn change_image(frame: &RgbImage, bg: &RgbImage, blur_radius_px: usize) -> R
                 / 3.0
         })
         .collect();
-    Ok(box_blur(&d, rows, cols, blur_radius_px))
+    Ok(box_blur(&d, rows, cols, BLUR_RADIUS_PX))
 }
 
 /// The measured contact mask of a real frame: the blurred change against the background above
@@ -115,7 +111,7 @@ pub fn measured_mask(frame: &RgbImage, bg: &RgbImage, opts: &MaskOptions) -> Res
             opts.threshold
         )));
     }
-    let d = change_image(frame, bg, opts.blur_radius_px)?;
+    let d = change_image(frame, bg)?;
     let raw = mask_from_fn(image_grid(frame.rows, frame.cols), |r, c| {
         d[r * frame.cols + c] > opts.threshold
     });
