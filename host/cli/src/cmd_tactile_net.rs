@@ -121,7 +121,7 @@ pub struct TrainNetArgs {
     #[arg(long, requires = "score_only")]
     pub fit_threshold: bool,
     /// Arithmetic of the plain engine's convolutions when scoring (training itself runs in
-    /// f32): f32, or bf16 (see `ocm tactile perceive --precision`).
+    /// f32): f32, winograd or bf16 (see `ocm tactile perceive --precision`).
     #[arg(long, default_value = "f32")]
     pub precision: nets::infer::Precision,
     /// What computes the training gradients: `plain`, the plain engine's hand-written
@@ -184,10 +184,12 @@ pub struct PerceiveArgs {
     /// (u_<name>.npy, M x 3, m; u_x = u_y = 0).
     #[arg(long, default_value = "out/tactile/perceive")]
     pub out: PathBuf,
-    /// Arithmetic of the network's convolutions: f32, or bf16 (bfloat16 weights and
-    /// activations with f32 sums; on CPUs with AVX-512 BF16 about 1.7 times the images per
-    /// second, outputs within about 1 % RMS of f32's).
-    #[arg(long, default_value = "f32")]
+    /// Arithmetic of the network's convolutions: winograd (f32 with Winograd's F(4 x 4,
+    /// 3 x 3) where the channels allow: about 1.7 times the images per second of f32 on any
+    /// x86-64 CPU, outputs within about 2e-6 RMS of f32's), f32 (direct), or bf16 (bfloat16
+    /// weights and activations with f32 sums; as fast as winograd on CPUs with AVX-512 BF16,
+    /// outputs within about 1 % RMS of f32's).
+    #[arg(long, default_value = "winograd")]
     pub precision: nets::infer::Precision,
     /// Print JSON.
     #[arg(long)]

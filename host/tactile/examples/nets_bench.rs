@@ -3,8 +3,9 @@
 //! 240 x 320, 2 threads, batches of 8, 5 repeats; `burn` also times burn's graph, `train` a
 //! forward and backward pass on burn's autodiff device).
 //! Freshly initialised networks of the exact architecture (the time does not depend on the
-//! weights); one JSON line per network and engine: the plain engine in f32 ("plain") and in
-//! bfloat16 ("plain-bf16", with its outputs' RMS difference from f32's).
+//! weights); one JSON line per network and engine: the plain engine in f32 ("plain"), in
+//! bfloat16 ("plain-bf16") and in f32 by Winograd's F(4 x 4, 3 x 3) ("plain-winograd"), the
+//! last two with their outputs' RMS difference from f32's.
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

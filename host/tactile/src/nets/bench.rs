@@ -13,7 +13,8 @@ pub struct NetBench {
     pub kind: NetKind,
     /// Which implementation: "burn" (the training graph on burn's CPU backend), "plain"
     /// ([`super::infer::PlainUNet`], what scoring and `ocm tactile perceive` use) or
-    /// "plain-bf16" (the same with [`Precision::Bf16`]); "burn-train-step" and
+    /// "plain-bf16" (the same with [`Precision::Bf16`]) or "plain-winograd" (with
+    /// [`Precision::Winograd`]); "burn-train-step" and
     /// "plain-train-step" time a training step's forward and backward passes.
     pub engine: String,
     /// Image size (rows, cols).
@@ -26,7 +27,7 @@ pub struct NetBench {
     pub images_per_s: Vec<f64>,
     /// Median of `images_per_s`.
     pub median_images_per_s: f64,
-    /// For "plain-bf16": the RMS of its outputs' difference from the `f32` engine's, relative
+    /// For "plain-bf16" and "plain-winograd": the RMS of its outputs' difference from the `f32` engine's, relative
     /// to the RMS of the `f32` outputs' deviation from their mean.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub relative_rms_difference: Option<f64>,
@@ -72,10 +73,11 @@ fn timed<T>(
 
 /// Times `repeats` forward calls of a batch of `batch` images of `rows` x `cols` through a
 /// freshly initialised `kind` network (after one warm-up call), on the current rayon pool,
-/// with the plain engine in `f32` and in bfloat16 and, when `with_burn`, burn's graph; when
-/// `with_train`, also up to 2 forward and backward passes on burn's autodiff device (engine
-/// "burn-train-step", images per second of training without the optimiser step) and
-/// `repeats` on the plain engine's training passes ("plain-train-step").
+/// with the plain engine in `f32`, in bfloat16 and in `f32` by Winograd's transforms and,
+/// when `with_burn`, burn's graph; when `with_train`, also up to 2 forward and backward passes
+/// on burn's autodiff device (engine "burn-train-step", images per second of training without
+/// the optimiser step) and `repeats` on the plain engine's training passes
+/// ("plain-train-step").
 pub fn bench_inference(
     kind: NetKind,
     rows: usize,
@@ -112,11 +114,17 @@ pub fn bench_inference(
     let plain = PlainUNet::new(&net)?;
     let (ips, reference) = timed(repeats, batch, || plain.forward(&x, batch, rows, cols))?;
     let mut out = vec![record("plain", ips)];
-    let half = plain.with_precision(Precision::Bf16);
+    let half = plain.clone().with_precision(Precision::Bf16);
     let (ips, y) = timed(repeats, batch, || half.forward(&x, batch, rows, cols))?;
     out.push(NetBench {
         relative_rms_difference: Some(relative_rms_difference(&y, &reference)),
         ..record("plain-bf16", ips)
+    });
+    let wino = plain.clone().with_precision(Precision::Winograd);
+    let (ips, y) = timed(repeats, batch, || wino.forward(&x, batch, rows, cols))?;
+    out.push(NetBench {
+        relative_rms_difference: Some(relative_rms_difference(&y, &reference)),
+        ..record("plain-winograd", ips)
     });
     let input = || Tensor::<4>::from_data(TensorData::new(x.clone(), [batch, c, rows, cols]), &dev);
     if with_burn {

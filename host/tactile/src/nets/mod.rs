@@ -11,6 +11,7 @@ pub mod infer;
 pub mod pairs;
 pub mod plain_loss;
 pub mod real_frames;
+mod winograd;
 
 use crate::mask::{Grid, Mask, mask_from_fn};
 use crate::metrics;
