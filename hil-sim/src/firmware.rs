@@ -51,6 +51,11 @@ pub trait Link {
         }
         Ok(())
     }
+
+    /// The link watchdog the lab sets on this firmware, us ([`LAB_SAFETY`]'s by default).
+    fn link_timeout_us(&self) -> u32 {
+        LAB_SAFETY.link_timeout_us
+    }
 }
 
 /// The firmware app linked into this process: commands go straight to
@@ -239,7 +244,11 @@ impl<L: Link> FirmwareMcu<L> {
             ki_pa_per_m_s: gains.ki_pa_per_m_s as f32,
             derivative_filter_s: gains.filter_s as f32,
         }))?;
-        me.expect_ack(CommandBody::SetSafety(LAB_SAFETY))?;
+        let safety = SafetyConfig {
+            link_timeout_us: me.link.link_timeout_us(),
+            ..LAB_SAFETY
+        };
+        me.expect_ack(CommandBody::SetSafety(safety))?;
         let ocms = f64::from(plant.manipulator.ocms_per_column);
         let col = ocms * plant.ocm.rest_length_m;
         for actuator in 0..3u8 {

@@ -232,6 +232,15 @@ impl Link for QemuLink {
         self.link.exchange(cmd, now_us)
     }
 
+    /// The largest watchdog the firmware accepts (10 s). The emulated SysTick follows the
+    /// host's wall clock, not the lab's ticks, so a host that stalls between two exchanges
+    /// for more than the lab's usual 1 s trips the watchdog and the firmware holds its
+    /// pressures: a loaded CI machine did once (`tests/pil.rs`, tick 3473 of 4000), where the
+    /// in-process twin, on the lab's clock, went on.
+    fn link_timeout_us(&self) -> u32 {
+        10_000_000
+    }
+
     fn exchange_all(
         &mut self,
         cmds: &[Command],
