@@ -7,8 +7,8 @@ use anyhow::Context;
 use ocm_peg::replay::{npe_fields, read_path, replay, write_frames, write_npe_fields};
 use ocm_peg::{
     ActionNoise, BcConfig, BcPolicy, ContactFeatures, DemoSet, DemoSettings, Evaluation,
-    ExpertConfig, InHandError, NpeEncoder, Randomisation, SceneConfig, TactileEncoder, TrialSpec,
-    evaluate_expert, evaluate_policy, train_bc,
+    ExpertConfig, Grasp, InHandError, NpeEncoder, Randomisation, SceneConfig, TactileEncoder,
+    TrialSpec, evaluate_expert, evaluate_policy, train_bc,
 };
 use std::path::{Path, PathBuf};
 
@@ -33,6 +33,8 @@ pub enum PegCommand {
         /// features.
         #[arg(long)]
         npe: Option<PathBuf>,
+        #[command(flatten)]
+        grasp: GraspArgs,
         /// Print a JSON summary.
         #[arg(long)]
         json: bool,
@@ -75,6 +77,13 @@ pub enum PegCommand {
         /// its demonstrations were made with `--npe`).
         #[arg(long)]
         npe: Option<PathBuf>,
+        /// Evaluate in a scene with this grasp instead of the one the policies were trained in
+        /// (e.g. policies cloned with a rigid grasp, run with a compliant one).
+        #[arg(long, value_enum)]
+        grasp: Option<GraspKind>,
+        /// Gel-on-peg friction coefficient of a compliant grasp given with --grasp.
+        #[arg(long, value_parser = crate::arg_check::positive, default_value_t = 1.0)]
+        pad_friction: f64,
         /// Print a JSON summary.
         #[arg(long)]
         json: bool,
@@ -85,6 +94,12 @@ pub enum PegCommand {
     Replay {
         /// The path CSV (e.g. paths/demo_000.csv of `ocm peg demos`).
         path: PathBuf,
+        /// How the pads hold the peg (with --demo: the demonstrations' grasp unless given).
+        #[arg(long, value_enum)]
+        grasp: Option<GraspKind>,
+        /// Gel-on-peg friction coefficient of a compliant grasp given with --grasp.
+        #[arg(long, value_parser = crate::arg_check::positive, default_value_t = 1.0)]
+        pad_friction: f64,
         /// In-hand offset along the pads' horizontal direction, mm.
         #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
         offset_y_mm: f64,
@@ -124,6 +139,38 @@ pub enum PegCommand {
         #[arg(long)]
         json: bool,
     },
+}
+
+/// How the pads hold the peg.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GraspKind {
+    /// A fixed joint: the peg never moves in the hand.
+    Rigid,
+    /// The gels' shear as springs (sliding along the pads, turning about their normal) with
+    /// Coulomb slip beyond the pads' friction.
+    Compliant,
+}
+
+/// The grasp options of `ocm peg demos`.
+#[derive(clap::Args, Debug)]
+pub struct GraspArgs {
+    /// How the pads hold the peg.
+    #[arg(long, value_enum, default_value_t = GraspKind::Rigid)]
+    grasp: GraspKind,
+    /// Gel-on-peg friction coefficient of the compliant grasp (the pads hold 2 mu N against
+    /// sliding).
+    #[arg(long, value_parser = crate::arg_check::positive, default_value_t = 1.0)]
+    pad_friction: f64,
+}
+
+/// The default scene with the grasp `kind` (a compliant one derived from the scene's gel).
+fn scene_with(kind: GraspKind, pad_friction: f64) -> anyhow::Result<SceneConfig> {
+    let base = SceneConfig::default();
+    let grasp = match kind {
+        GraspKind::Rigid => Grasp::Rigid,
+        GraspKind::Compliant => Grasp::Compliant(base.gel_grasp(pad_friction)?),
+    };
+    Ok(SceneConfig { grasp, ..base })
 }
 
 /// The tactile encoder: the engine of `npe` when given, else the raw contact features.
@@ -174,6 +221,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             seed,
             out,
             npe,
+            grasp,
             json,
         } => {
             let enc = encoder(npe.as_deref())?;
@@ -181,7 +229,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             let settings = DemoSettings {
                 count,
                 seed,
-                scene: SceneConfig::default(),
+                scene: scene_with(grasp.grasp, grasp.pad_friction)?,
                 randomisation: Randomisation::default(),
                 expert: ExpertConfig::default(),
                 noise: ActionNoise::default(),
@@ -194,8 +242,15 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             let secs = t.elapsed().as_secs_f64();
             set.save(&out)?;
             let tried = set.outcomes.len();
+            let slipped = set
+                .outcomes
+                .iter()
+                .filter(|o| o.success && o.slip != [0.0; 3])
+                .count();
             let summary = serde_json::json!({
                 "demos": set.demos(),
+                "grasp": set.settings.scene.grasp,
+                "demos_with_slip": slipped,
                 "trials_run": tried,
                 "expert_success_rate": set.demos() as f64 / tried.max(1) as f64,
                 "rows": set.rows(),
@@ -263,12 +318,29 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             seed,
             out,
             npe,
+            grasp,
+            pad_friction,
             json,
         } => {
             let out = out.unwrap_or_else(|| policies.clone());
             mkdir(&out)?;
             let enc = encoder(npe.as_deref())?;
-            let scene = SceneConfig::default();
+            let loaded = ["touch", "notouch"].map(|name| {
+                let file = policies.join(format!("policy_{name}.ckpt"));
+                BcPolicy::load(&file).with_context(|| format!("loading {}", file.display()))
+            });
+            let [touch, notouch] = loaded;
+            let (touch, notouch) = (touch?, notouch?);
+            let trained = touch.meta.scene.clone().unwrap_or_default();
+            anyhow::ensure!(
+                notouch.meta.scene.clone().unwrap_or_default() == trained,
+                "the touch and no-touch policies in {} were trained in different scenes",
+                policies.display()
+            );
+            let scene = match grasp {
+                Some(kind) => scene_with(kind, pad_friction)?,
+                None => trained.clone(),
+            };
             let rand = Randomisation::default();
             let spec = TrialSpec {
                 scene: &scene,
@@ -277,9 +349,8 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 trials,
             };
             let mut evals = Vec::new();
-            for name in ["touch", "notouch"] {
+            for (name, p) in [("touch", touch), ("notouch", notouch)] {
                 let file = policies.join(format!("policy_{name}.ckpt"));
-                let p = BcPolicy::load(&file)?;
                 anyhow::ensure!(
                     !p.meta.touch || p.meta.encoder == enc.name(),
                     "{} reads {} latents but the encoder is {}{}",
@@ -315,6 +386,12 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 "offset_y_m",
                 "offset_z_m",
                 "tilt_rad",
+                "slip_y_m",
+                "slip_z_m",
+                "slip_turn_rad",
+                "largest_shift_y_m",
+                "largest_shift_z_m",
+                "largest_turn_rad",
             ])?;
             let mut summary = Vec::new();
             for (ev, secs) in &evals {
@@ -331,6 +408,12 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                         format!("{:.6e}", e.offset_y_m),
                         format!("{:.6e}", e.offset_z_m),
                         format!("{:.6e}", e.tilt_rad),
+                        format!("{:.6e}", o.slip[0]),
+                        format!("{:.6e}", o.slip[1]),
+                        format!("{:.6e}", o.slip[2]),
+                        format!("{:.6e}", o.largest_shift[0]),
+                        format!("{:.6e}", o.largest_shift[1]),
+                        format!("{:.6e}", o.largest_shift[2]),
                     ])?;
                 }
                 tip_depth_chart(
@@ -348,6 +431,13 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                     "trials": ev.outcomes.len(),
                     "success_rate": ev.success_rate(),
                     "median_success_time_s": ev.median_success_time_s(),
+                    "trials_with_slip": ev.outcomes.iter().filter(|o| o.slip != [0.0; 3]).count(),
+                    "largest_turn_in_hand_rad": ev
+                        .outcomes
+                        .iter()
+                        .map(|o| o.largest_shift[2])
+                        .fold(0.0, f64::max),
+                    "median_largest_turn_in_hand_rad": ev.median_largest_turn_rad(),
                     "wall_time_s": secs,
                 }));
             }
@@ -392,6 +482,8 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 "seed": seed,
                 "encoder": enc.name(),
                 "npe": npe,
+                "grasp": scene.grasp,
+                "trained_grasp": trained.grasp,
                 "controllers": summary,
             });
             std::fs::write(
@@ -416,6 +508,8 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
         }
         PegCommand::Replay {
             path,
+            grasp,
+            pad_friction,
             offset_y_mm,
             offset_z_mm,
             tilt_deg,
@@ -445,27 +539,36 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 None => &ContactFeatures,
             };
             let rows = read_path(&path)?;
-            let scene = SceneConfig::default();
-            let error = match demo {
+            let (error, demo_scene) = match demo {
                 Some(k) => {
                     let dir = path
                         .parent()
                         .and_then(Path::parent)
                         .context("the path has no demos folder above it")?;
                     let set = DemoSet::load(dir)?;
-                    set.outcomes
+                    let error = set
+                        .outcomes
                         .iter()
                         .filter(|o| o.success)
                         .nth(k)
                         .with_context(|| format!("{} has no demonstration {k}", dir.display()))?
                         .trial
-                        .error
+                        .error;
+                    (error, Some(set.settings.scene))
                 }
-                None => InHandError {
-                    offset_y_m: offset_y_mm * 1e-3,
-                    offset_z_m: offset_z_mm * 1e-3,
-                    tilt_rad: tilt_deg.to_radians(),
-                },
+                None => (
+                    InHandError {
+                        offset_y_m: offset_y_mm * 1e-3,
+                        offset_z_m: offset_z_mm * 1e-3,
+                        tilt_rad: tilt_deg.to_radians(),
+                    },
+                    None,
+                ),
+            };
+            let scene = match (grasp, demo_scene) {
+                (Some(kind), _) => scene_with(kind, pad_friction)?,
+                (None, Some(s)) => s,
+                (None, None) => SceneConfig::default(),
             };
             let pb = bar(0, "replay");
             let frames = replay(&scene, &rows, error, enc, &mut |k, n| {

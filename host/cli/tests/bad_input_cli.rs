@@ -127,6 +127,16 @@ fn zero_counts_and_non_finite_numbers_are_refused_naming_the_flag() {
         "--lambda-total",
         "must be 0 or more",
     );
+    refused_flag(
+        &["peg", "demos", "--out", "x", "--pad-friction", "nan"],
+        "--pad-friction",
+        "finite",
+    );
+    refused_flag(
+        &["peg", "eval", "x", "--pad-friction=-1"],
+        "--pad-friction",
+        "greater than 0",
+    );
     for args in [
         &["npe", "train", "--lr-final", "1.5"][..],
         &["learn", "train", "--lr-final=-0.1"],

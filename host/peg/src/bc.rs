@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::demos::DemoSet;
 use crate::error::{PegError, Result};
-use crate::scene::{N_ACTION, N_PROPRIO};
+use crate::scene::{N_ACTION, N_PROPRIO, SceneConfig};
 
 /// Architecture name in the checkpoints.
 pub const ARCHITECTURE: &str = "ocm-peg/bc-mlp";
@@ -69,6 +69,10 @@ pub struct PolicyMeta {
     pub best_loss: f64,
     /// Training wall time, s.
     pub train_time_s: f64,
+    /// The scene of its demonstrations (absent in checkpoints written before the grasp could
+    /// be compliant: the default scene).
+    #[serde(default)]
+    pub scene: Option<SceneConfig>,
 }
 
 /// A trained policy: network, scalers and what it sees.
@@ -127,6 +131,7 @@ pub fn train_bc(demos: &DemoSet, touch: bool, cfg: &BcConfig) -> Result<BcTraini
                 best_epoch: report.best_epoch,
                 best_loss: report.best_loss,
                 train_time_s: start.elapsed().as_secs_f64(),
+                scene: Some(demos.settings.scene.clone()),
             },
             config,
         },

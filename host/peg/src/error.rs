@@ -51,3 +51,12 @@ pub(crate) fn finite(name: &str, v: f64) -> Result<f64> {
         Err(PegError::Invalid(format!("{name} = {v} is not finite")))
     }
 }
+
+/// Refuses a value that is not a positive number, naming it.
+pub(crate) fn positive(name: &str, v: f64) -> Result<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(PegError::Invalid(format!("{name} = {v} must be positive")))
+    }
+}

@@ -31,22 +31,33 @@ impl Evaluation {
 
     /// Median time to success over the successful trials, s (NaN without any).
     pub fn median_success_time_s(&self) -> f64 {
-        let mut t: Vec<f64> = self
-            .outcomes
-            .iter()
-            .filter(|o| o.success)
-            .map(|o| o.time_s)
-            .collect();
-        if t.is_empty() {
-            return f64::NAN;
-        }
-        t.sort_by(f64::total_cmp);
-        let m = t.len() / 2;
-        if t.len() % 2 == 1 {
-            t[m]
-        } else {
-            0.5 * (t[m - 1] + t[m])
-        }
+        median(
+            self.outcomes
+                .iter()
+                .filter(|o| o.success)
+                .map(|o| o.time_s)
+                .collect(),
+        )
+    }
+
+    /// Median over the trials of the largest turn of the peg in the hand, rad (zero with a
+    /// rigid grasp; NaN without trials).
+    pub fn median_largest_turn_rad(&self) -> f64 {
+        median(self.outcomes.iter().map(|o| o.largest_shift[2]).collect())
+    }
+}
+
+/// The median of `v` (NaN when empty).
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
     }
 }
 
@@ -134,12 +145,7 @@ pub fn evaluate_policy(
     let outcomes = specs
         .iter()
         .zip(&scenes)
-        .map(|(t, s)| Outcome {
-            trial: *t,
-            success: s.inserted(),
-            time_s: s.time_s(),
-            tip_m: s.peg_tip().0,
-        })
+        .map(|(t, s)| Outcome::at_end(t, s))
         .collect();
     Ok(Evaluation {
         controller: name.to_string(),

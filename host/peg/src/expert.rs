@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{PegError, Result};
+use crate::error::{PegError, Result, positive};
 use crate::scene::{N_ACTION, PegScene};
 
 /// Gains and thresholds of the expert.
@@ -46,11 +46,7 @@ impl ExpertConfig {
             ("align_roll_rad", self.align_roll_rad),
             ("insert_speed_m_s", self.insert_speed_m_s),
         ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(PegError::Invalid(format!(
-                    "expert {name} = {v} must be positive"
-                )));
-            }
+            positive(&format!("expert {name}"), v)?;
         }
         if !self.hover_m.is_finite() {
             return Err(PegError::Invalid("expert hover_m is not finite".into()));

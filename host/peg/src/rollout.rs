@@ -43,6 +43,28 @@ pub struct Outcome {
     pub time_s: f64,
     /// The tip at the end (hole frame), m.
     pub tip_m: [f64; 3],
+    /// How far the peg slipped in the hand by the end (compliant grasp; zero when rigid):
+    /// along the pads' horizontal direction (m), along the fingers (m), turn (rad).
+    #[serde(default)]
+    pub slip: [f64; 3],
+    /// The largest |shift| of the peg in the hand during the trial, per component (elastic
+    /// and slipped; compliant grasp).
+    #[serde(default)]
+    pub largest_shift: [f64; 3],
+}
+
+impl Outcome {
+    /// The outcome of `trial` as `scene` ends it.
+    pub fn at_end(trial: &Trial, scene: &PegScene) -> Self {
+        Self {
+            trial: *trial,
+            success: scene.inserted(),
+            time_s: scene.time_s(),
+            tip_m: scene.peg_tip().0,
+            slip: scene.slipped(),
+            largest_shift: scene.largest_shift(),
+        }
+    }
 }
 
 /// One recorded control step.
@@ -86,14 +108,5 @@ pub fn run_trial(
     }
     let g = scene.gripper();
     path.push([scene.time_s(), g.x_m, g.y_m, g.z_m, g.roll_rad]);
-    Ok((
-        Outcome {
-            trial: *trial,
-            success: scene.inserted(),
-            time_s: scene.time_s(),
-            tip_m: scene.peg_tip().0,
-        },
-        steps,
-        path,
-    ))
+    Ok((Outcome::at_end(trial, &scene), steps, path))
 }

@@ -3,8 +3,8 @@
 
 use ocm_peg::encoder::CONTACT_FEATURES;
 use ocm_peg::{
-    ContactFeatures, ExpertConfig, GripperPose, InHandError, PegScene, Randomisation, SceneConfig,
-    TactileEncoder,
+    ContactFeatures, ExpertConfig, Grasp, GripperPose, InHandError, PegScene, Randomisation,
+    SceneConfig, TactileEncoder,
 };
 
 fn high() -> GripperPose {
@@ -103,28 +103,35 @@ fn a_tilted_peg_turns_the_patch_axis() {
     }
 }
 
+/// With either grasp.
 #[test]
 fn the_expert_inserts_and_the_same_seed_gives_the_same_run() {
-    let c = SceneConfig::default();
+    let rigid = SceneConfig::default();
+    let compliant = SceneConfig {
+        grasp: Grasp::Compliant(rigid.gel_grasp(1.0).unwrap()),
+        ..rigid.clone()
+    };
     let r = Randomisation::default();
     let ex = ExpertConfig::default();
-    let run = || {
-        ocm_peg::evaluate_expert(
-            &ex,
-            ocm_peg::TrialSpec {
-                scene: &c,
-                randomisation: &r,
-                seed: 7,
-                trials: 3,
-            },
-            &ContactFeatures,
-        )
-        .unwrap()
-    };
-    let a = run();
-    let b = run();
-    assert_eq!(a, b);
-    assert_eq!(a.success_rate(), 1.0, "{:?}", a.outcomes);
+    for c in [rigid, compliant] {
+        let run = || {
+            ocm_peg::evaluate_expert(
+                &ex,
+                ocm_peg::TrialSpec {
+                    scene: &c,
+                    randomisation: &r,
+                    seed: 7,
+                    trials: 3,
+                },
+                &ContactFeatures,
+            )
+            .unwrap()
+        };
+        let a = run();
+        let b = run();
+        assert_eq!(a, b);
+        assert_eq!(a.success_rate(), 1.0, "{:?} {:?}", c.grasp, a.outcomes);
+    }
 }
 
 #[test]
