@@ -60,3 +60,14 @@ pub(crate) fn positive(name: &str, v: f64) -> Result<f64> {
         Err(PegError::Invalid(format!("{name} = {v} must be positive")))
     }
 }
+
+/// Refuses a value that is negative or not finite, naming it.
+pub(crate) fn non_negative(name: &str, v: f64) -> Result<f64> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(PegError::Invalid(format!(
+            "{name} = {v} must be finite and not negative"
+        )))
+    }
+}

@@ -120,7 +120,11 @@ pub fn evaluate_policy(
         .collect();
     let mut scenes = specs
         .iter()
-        .map(|t| PegScene::new(config, t.start, t.error))
+        .map(|t| {
+            let mut s = PegScene::new(config, t.start, t.error)?;
+            s.seed_sensors(t.seed, t.index);
+            Ok(s)
+        })
         .collect::<Result<Vec<_>>>()?;
     let mut paths: Vec<Vec<[f64; 4]>> = scenes.iter().map(|s| vec![tip_row(s)]).collect();
     let limit = config.max_control_steps();
@@ -133,7 +137,7 @@ pub fn evaluate_policy(
         }
         let obs = active
             .iter()
-            .map(|&i| observe(&scenes[i], encoder))
+            .map(|&i| observe(&mut scenes[i], encoder))
             .collect::<Result<Vec<_>>>()?;
         let actions = policy.act_batch(&obs)?;
         for (&i, a) in active.iter().zip(actions) {

@@ -12,7 +12,7 @@
 use rapier3d_f64::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{PegError, Result, positive};
+use crate::error::{PegError, Result, non_negative, positive};
 
 /// How the pads hold the peg.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -107,12 +107,7 @@ impl GraspCompliance {
         ] {
             positive(&format!("grasp {name}"), v)?;
         }
-        if !(self.damping_ratio.is_finite() && self.damping_ratio >= 0.0) {
-            return Err(PegError::Invalid(format!(
-                "grasp damping_ratio = {} must be finite and not negative",
-                self.damping_ratio
-            )));
-        }
+        non_negative("grasp damping_ratio", self.damping_ratio)?;
         Ok(())
     }
 }

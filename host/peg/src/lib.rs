@@ -16,6 +16,7 @@ pub mod patch;
 pub mod replay;
 pub mod rollout;
 pub mod scene;
+pub mod sensor;
 pub mod trial;
 
 pub use bc::{BcConfig, BcPolicy, BcTraining, train_bc};
@@ -28,4 +29,5 @@ pub use expert::ExpertConfig;
 pub use grasp::{GelGrip, Grasp, GraspCompliance};
 pub use npe_encoder::NpeEncoder;
 pub use scene::{GripperPose, InHandError, PegScene, SceneConfig};
+pub use sensor::SensorNoise;
 pub use trial::{Randomisation, Trial};

@@ -9,10 +9,11 @@ use crate::scene::{N_ACTION, N_PROPRIO, PegScene, SceneConfig};
 use crate::trial::Trial;
 
 /// The observation `[proprioception, Z_left, Z_right]`: gripper x, y, z (m) and roll (rad) in
-/// the hole frame, then each sensor's latent.
-pub fn observe(scene: &PegScene, encoder: &dyn TactileEncoder) -> Result<Vec<f64>> {
+/// the hole frame, then each sensor's latent of what it reports (with the scene's sensor
+/// errors).
+pub fn observe(scene: &mut PegScene, encoder: &dyn TactileEncoder) -> Result<Vec<f64>> {
     let mut obs = scene.gripper().to_array().to_vec();
-    for c in scene.contacts()? {
+    for c in scene.sensed()? {
         obs.extend(
             encoder
                 .latent(&c.points_m, c.force_n)?
@@ -89,11 +90,12 @@ pub fn run_trial(
     noise: &mut dyn FnMut() -> [f64; N_ACTION],
 ) -> Result<(Outcome, Vec<Step>, Vec<[f64; 5]>)> {
     let mut scene = PegScene::new(config, trial.start, trial.error)?;
+    scene.seed_sensors(trial.seed, trial.index);
     let mut steps = Vec::new();
     let mut path = Vec::new();
     let limit = config.max_control_steps();
     while !scene.inserted() && scene.steps() < limit {
-        let obs = observe(&scene, encoder)?;
+        let obs = observe(&mut scene, encoder)?;
         let action = controller(&scene, &obs)?;
         let g = scene.gripper();
         path.push([scene.time_s(), g.x_m, g.y_m, g.z_m, g.roll_rad]);

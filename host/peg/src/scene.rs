@@ -15,6 +15,9 @@ use serde::{Deserialize, Serialize};
 use crate::contact::{GelFoundation, SensorContact, SensorFrame, pad_contact};
 use crate::error::{PegError, Result, finite, positive};
 use crate::grasp::{GelGrip, Grasp, GraspCompliance, HeldPeg, peg_inertia};
+use crate::sensor::SensorNoise;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
 
 /// Proprioception values: gripper x, y, z (m, hole frame) and roll (rad).
 pub const N_PROPRIO: usize = 4;
@@ -66,6 +69,9 @@ pub struct SceneConfig {
     /// How the pads hold the peg (rigid when a stored configuration does not say).
     #[serde(default)]
     pub grasp: Grasp,
+    /// Errors of what the sensors report (exact when a stored configuration does not say).
+    #[serde(default)]
+    pub sensor_noise: SensorNoise,
 }
 
 impl Default for SceneConfig {
@@ -90,6 +96,7 @@ impl Default for SceneConfig {
             success_depth_m: 0.008,
             time_limit_s: 8.0,
             grasp: Grasp::Rigid,
+            sensor_noise: SensorNoise::default(),
         }
     }
 }
@@ -148,7 +155,7 @@ impl SceneConfig {
         if let Grasp::Compliant(c) = &self.grasp {
             c.validate()?;
         }
-        Ok(())
+        self.sensor_noise.validate()
     }
 
     /// Gel Poisson's ratio of the pads (`ocm-tactile`'s default for the DIGIT gel).
@@ -257,8 +264,14 @@ pub struct PegScene {
     held: Option<HeldPeg>,
     /// Largest |in-hand shift| seen at the end of a control step, per component.
     largest_shift: [f64; 3],
+    /// The draws of the sensors' errors.
+    sensor_rng: ChaCha8Rng,
     steps: usize,
 }
+
+/// Mixed into a trial's seed for its sensor errors, so that they do not repeat the draws of
+/// the trial's initial condition.
+const SENSOR_SEED_SALT: u64 = 0x5e45_0a15_e000_0001;
 
 fn roll_of(r: &Rotation) -> f64 {
     // The bodies rotate about x only (up to solver round-off): q = (sin(a/2), 0, 0, cos(a/2)).
@@ -441,6 +454,7 @@ impl PegScene {
             error,
             held,
             largest_shift: [0.0; 3],
+            sensor_rng: ChaCha8Rng::seed_from_u64(SENSOR_SEED_SALT),
             steps: 0,
         };
         // One step at rest fills the contact manifolds of the grasp.
@@ -586,6 +600,24 @@ impl PegScene {
     /// Whether the peg's tip has reached the success depth.
     pub fn inserted(&self) -> bool {
         self.peg_tip().0[2] <= -self.config.success_depth_m
+    }
+
+    /// Draws the sensors' errors from stream `stream` of `seed` from now on (each trial its
+    /// own stream, as its initial condition).
+    pub fn seed_sensors(&mut self, seed: u64, stream: u64) {
+        self.sensor_rng = ChaCha8Rng::seed_from_u64(seed ^ SENSOR_SEED_SALT);
+        self.sensor_rng.set_stream(stream);
+    }
+
+    /// What the left (0) and right (1) sensor report: the contact with the configuration's
+    /// sensor errors drawn afresh (the exact contact when there are none).
+    pub fn sensed(&mut self) -> Result<[SensorContact; 2]> {
+        let [left, right] = self.contacts()?;
+        let noise = self.config.sensor_noise;
+        Ok([
+            noise.read(&left, &mut self.sensor_rng)?,
+            noise.read(&right, &mut self.sensor_rng)?,
+        ])
     }
 
     /// What the left (0) and right (1) sensor feel.

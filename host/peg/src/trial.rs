@@ -4,7 +4,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{PegError, Result};
+use crate::error::{PegError, Result, non_negative};
 use crate::scene::{GripperPose, InHandError, SceneConfig};
 
 /// Ranges of the randomisation (uniform, symmetric about zero unless a range is given).
@@ -40,6 +40,9 @@ impl Default for Randomisation {
 /// One trial's initial condition.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Trial {
+    /// Seed of the stream the trial was drawn from (its sensors' errors are drawn from it too).
+    #[serde(default)]
+    pub seed: u64,
     /// Index of the trial in its stream.
     pub index: u64,
     /// Gripper pose at the start.
@@ -60,11 +63,7 @@ impl Randomisation {
             ("start_height_m[0]", self.start_height_m[0]),
             ("start_height_m[1]", self.start_height_m[1]),
         ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(PegError::Invalid(format!(
-                    "randomisation {name} = {v} must be finite and not negative"
-                )));
-            }
+            non_negative(&format!("randomisation {name}"), v)?;
         }
         if self.start_height_m[0] > self.start_height_m[1] {
             return Err(PegError::Invalid(format!(
@@ -104,6 +103,7 @@ impl Randomisation {
         // The tip hangs peg_length - peg_top below the gripper's origin at the nominal grasp.
         let z = h + config.peg_length_m - config.peg_top_m;
         Trial {
+            seed,
             index,
             start: GripperPose {
                 x_m: x,

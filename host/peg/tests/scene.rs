@@ -177,3 +177,41 @@ fn bad_inputs_are_errors_naming_the_value() {
         .to_string();
     assert!(e.contains("clearance_m"), "{e}");
 }
+
+/// The sensors' errors reach what a policy sees, are drawn per trial from its seed (the same
+/// seed and trial read the same, another trial reads otherwise) and leave the physics alone.
+#[test]
+fn sensor_errors_are_seeded_per_trial_and_move_only_the_reading() {
+    let c = SceneConfig {
+        sensor_noise: ocm_peg::SensorNoise::perception_on_real_frames(),
+        ..SceneConfig::default()
+    };
+    let reading = |seed: u64, stream: u64| {
+        let mut scene = PegScene::new(&c, high(), InHandError::default()).unwrap();
+        scene.seed_sensors(seed, stream);
+        let exact = scene.contacts().unwrap();
+        let mut read = Vec::new();
+        for _ in 0..3 {
+            let [l, r] = scene.sensed().unwrap();
+            read.push((
+                ContactFeatures.latent(&l.points_m, l.force_n).unwrap(),
+                ContactFeatures.latent(&r.points_m, r.force_n).unwrap(),
+            ));
+            scene.step([0.0; 4]).unwrap();
+        }
+        (exact, read, scene.peg_tip())
+    };
+    let (exact, a, tip_a) = reading(5, 0);
+    let (_, b, _) = reading(5, 0);
+    let (_, other, tip_other) = reading(5, 1);
+    assert_eq!(a, b);
+    assert_ne!(a, other);
+    assert_eq!(tip_a, tip_other, "the errors do not touch the physics");
+    let z = ContactFeatures
+        .latent(&exact[0].points_m, exact[0].force_n)
+        .unwrap();
+    assert_ne!(a[0].0, z, "the reading is not the exact contact");
+    assert_ne!(a[0].0, a[1].0, "drawn afresh every step");
+    // The patch keeps its size and its force (only centroid and rotation have errors here).
+    assert!((a[0].0[5] - z[5]).abs() < 1e-4 && a[0].0[9] == z[9]);
+}
