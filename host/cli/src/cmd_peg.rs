@@ -91,6 +91,9 @@ pub enum PegCommand {
         /// Multiplies every deviation of --sensor-noise.
         #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 1.0)]
         noise_scale: f64,
+        /// Low-pass the latents with this time constant, s, instead of the policies' own.
+        #[arg(long, value_parser = crate::arg_check::non_negative)]
+        touch_filter_s: Option<f64>,
         /// Print a JSON summary.
         #[arg(long)]
         json: bool,
@@ -204,6 +207,10 @@ pub struct SceneArgs {
     /// Multiplies every deviation of --sensor-noise.
     #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 1.0)]
     noise_scale: f64,
+    /// Time constant of a first-order low-pass on each sensor's latent before the policy
+    /// reads it, s (0: the latest reading alone).
+    #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 0.0)]
+    touch_filter_s: f64,
 }
 
 /// The default scene with the grasp `kind` (a compliant one derived from the scene's gel).
@@ -274,6 +281,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 seed,
                 scene: SceneConfig {
                     sensor_noise: scene.sensor_noise.noise(scene.noise_scale),
+                    touch_filter_s: scene.touch_filter_s,
                     ..scene_with(scene.grasp, scene.pad_friction)?
                 },
                 randomisation: Randomisation::default(),
@@ -297,6 +305,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 "demos": set.demos(),
                 "grasp": set.settings.scene.grasp,
                 "sensor_noise": set.settings.scene.sensor_noise,
+                "touch_filter_s": set.settings.scene.touch_filter_s,
                 "demos_with_slip": slipped,
                 "trials_run": tried,
                 "expert_success_rate": set.demos() as f64 / tried.max(1) as f64,
@@ -369,6 +378,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             pad_friction,
             sensor_noise,
             noise_scale,
+            touch_filter_s,
             json,
         } => {
             let out = out.unwrap_or_else(|| policies.clone());
@@ -389,12 +399,16 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             let mut scene = match grasp {
                 Some(kind) => SceneConfig {
                     sensor_noise: trained.sensor_noise,
+                    touch_filter_s: trained.touch_filter_s,
                     ..scene_with(kind, pad_friction)?
                 },
                 None => trained.clone(),
             };
             if let Some(kind) = sensor_noise {
                 scene.sensor_noise = kind.noise(noise_scale);
+            }
+            if let Some(tau) = touch_filter_s {
+                scene.touch_filter_s = tau;
             }
             let rand = Randomisation::default();
             let spec = TrialSpec {
@@ -541,6 +555,8 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 "trained_grasp": trained.grasp,
                 "sensor_noise": scene.sensor_noise,
                 "trained_sensor_noise": trained.sensor_noise,
+                "touch_filter_s": scene.touch_filter_s,
+                "trained_touch_filter_s": trained.touch_filter_s,
                 "controllers": summary,
             });
             std::fs::write(
@@ -708,6 +724,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             let summary = serde_json::json!({
                 "frames": frames.len(),
                 "in_hand_error": error,
+                "grasp": scene.grasp,
                 "final_tip_m": frames.last().map(|f| f.tip_m),
                 "encoder": enc.name(),
                 "npe_fields_s": npe_force.as_ref().map(|(_, s)| s),

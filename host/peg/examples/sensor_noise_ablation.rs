@@ -1,8 +1,9 @@
 //! Which of the perception's errors a cloned touch policy tolerates: the policies of
 //! `ocm peg train DIR` evaluated with the real-frame centroid error alone, the rotation error
-//! alone and both, at several multiples, on 100 trials of seeds 1000 and 2000.
+//! alone and both, at several multiples, on 100 trials of seeds 1000 and 2000, optionally with
+//! the latents low-passed (time constant in seconds, the second argument).
 //!
-//! `cargo run -p ocm-peg --example sensor_noise_ablation -- out/peg/rigid`
+//! `cargo run -p ocm-peg --example sensor_noise_ablation -- out/peg/rigid [0.2]`
 
 use ocm_peg::{
     BcPolicy, ContactFeatures, Randomisation, SceneConfig, SensorNoise, TrialSpec, evaluate_policy,
@@ -13,6 +14,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .nth(1)
         .ok_or("usage: sensor_noise_ablation POLICY_DIR")?;
     let policy = BcPolicy::load(&std::path::Path::new(&dir).join("policy_touch.ckpt"))?;
+    let tau: f64 = match std::env::args().nth(2) {
+        Some(t) => t.parse()?,
+        None => 0.0,
+    };
     let real = SensorNoise::perception_on_real_frames();
     println!("| errors | scale | success, seed 1000 / 2000 | median time to insert, s |");
     println!("|---|---|---|---|");
@@ -41,6 +46,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             };
             let scene = SceneConfig {
                 sensor_noise: noise,
+                touch_filter_s: tau,
                 ..policy.meta.scene.clone().unwrap_or_default()
             };
             let mut cells = Vec::new();

@@ -10,17 +10,19 @@ use crate::trial::Trial;
 
 /// The observation `[proprioception, Z_left, Z_right]`: gripper x, y, z (m) and roll (rad) in
 /// the hole frame, then each sensor's latent of what it reports (with the scene's sensor
-/// errors).
+/// errors, through its low-pass when it has one). Call once per control step.
 pub fn observe(scene: &mut PegScene, encoder: &dyn TactileEncoder) -> Result<Vec<f64>> {
-    let mut obs = scene.gripper().to_array().to_vec();
+    let mut latents = Vec::with_capacity(2 * encoder.dim());
     for c in scene.sensed()? {
-        obs.extend(
+        latents.extend(
             encoder
                 .latent(&c.points_m, c.force_n)?
                 .into_iter()
                 .map(f64::from),
         );
     }
+    let mut obs = scene.gripper().to_array().to_vec();
+    obs.extend(scene.low_pass(latents));
     Ok(obs)
 }
 

@@ -13,7 +13,7 @@ use rapier3d_f64::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::contact::{GelFoundation, SensorContact, SensorFrame, pad_contact};
-use crate::error::{PegError, Result, finite, positive};
+use crate::error::{PegError, Result, finite, non_negative, positive};
 use crate::grasp::{GelGrip, Grasp, GraspCompliance, HeldPeg, peg_inertia};
 use crate::sensor::SensorNoise;
 use rand::SeedableRng;
@@ -72,6 +72,10 @@ pub struct SceneConfig {
     /// Errors of what the sensors report (exact when a stored configuration does not say).
     #[serde(default)]
     pub sensor_noise: SensorNoise,
+    /// Time constant of a first-order low-pass on each sensor's latent before a policy reads
+    /// it, s (0: the latest reading alone).
+    #[serde(default)]
+    pub touch_filter_s: f64,
 }
 
 impl Default for SceneConfig {
@@ -97,6 +101,7 @@ impl Default for SceneConfig {
             time_limit_s: 8.0,
             grasp: Grasp::Rigid,
             sensor_noise: SensorNoise::default(),
+            touch_filter_s: 0.0,
         }
     }
 }
@@ -155,6 +160,7 @@ impl SceneConfig {
         if let Grasp::Compliant(c) = &self.grasp {
             c.validate()?;
         }
+        non_negative("touch_filter_s", self.touch_filter_s)?;
         self.sensor_noise.validate()
     }
 
@@ -266,6 +272,8 @@ pub struct PegScene {
     largest_shift: [f64; 3],
     /// The draws of the sensors' errors.
     sensor_rng: ChaCha8Rng,
+    /// The low-passed latents of both sensors (None before the first reading).
+    filtered: Option<Vec<f64>>,
     steps: usize,
 }
 
@@ -455,6 +463,7 @@ impl PegScene {
             held,
             largest_shift: [0.0; 3],
             sensor_rng: ChaCha8Rng::seed_from_u64(SENSOR_SEED_SALT),
+            filtered: None,
             steps: 0,
         };
         // One step at rest fills the contact manifolds of the grasp.
@@ -618,6 +627,28 @@ impl PegScene {
             noise.read(&left, &mut self.sensor_rng)?,
             noise.read(&right, &mut self.sensor_rng)?,
         ])
+    }
+
+    /// Passes one control step's latents of both sensors through the configuration's low-pass
+    /// (time constant `touch_filter_s`; the first reading starts it) and returns what a policy
+    /// reads. Call once per control step.
+    pub fn low_pass(&mut self, latents: Vec<f64>) -> Vec<f64> {
+        let tau = self.config.touch_filter_s;
+        if tau <= 0.0 {
+            return latents;
+        }
+        let dt = self.config.control_dt_s();
+        let a = dt / (tau + dt);
+        let out = match self.filtered.take() {
+            Some(prev) if prev.len() == latents.len() => prev
+                .iter()
+                .zip(&latents)
+                .map(|(p, z)| p + a * (z - p))
+                .collect(),
+            _ => latents,
+        };
+        self.filtered = Some(out.clone());
+        out
     }
 
     /// What the left (0) and right (1) sensor feel.

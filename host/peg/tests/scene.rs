@@ -215,3 +215,65 @@ fn sensor_errors_are_seeded_per_trial_and_move_only_the_reading() {
     // The patch keeps its size and its force (only centroid and rotation have errors here).
     assert!((a[0].0[5] - z[5]).abs() < 1e-4 && a[0].0[9] == z[9]);
 }
+
+/// The low-pass on the latents: a step from 0 to 1 reaches 1 - (1 - a)^k after k control steps
+/// (a = dt / (tau + dt)); white reading errors keep a / (2 - a) of their variance; no time
+/// constant passes the reading through.
+#[test]
+fn the_touch_filter_is_a_first_order_low_pass() {
+    let tau = 0.1;
+    let c = SceneConfig {
+        sensor_noise: ocm_peg::SensorNoise::perception_on_real_frames(),
+        touch_filter_s: tau,
+        ..SceneConfig::default()
+    };
+    let dt = c.control_dt_s();
+    let a = dt / (tau + dt);
+    let mut scene = PegScene::new(&c, high(), InHandError::default()).unwrap();
+    assert_eq!(scene.low_pass(vec![0.0, 2.0]), vec![0.0, 2.0]);
+    for k in 1..=10 {
+        let y = scene.low_pass(vec![1.0, 2.0]);
+        let expected = 1.0 - (1.0 - a).powi(k);
+        assert!(
+            (y[0] - expected).abs() < 1e-12,
+            "step {k}: {} against {expected}",
+            y[0]
+        );
+        assert!((y[1] - 2.0).abs() < 1e-12);
+    }
+    // The centroid reading of the left sensor, raw and filtered, over 4,000 control steps.
+    let mut scene = PegScene::new(&c, high(), InHandError::default()).unwrap();
+    scene.seed_sensors(9, 0);
+    let (mut raw, mut low) = (Vec::new(), Vec::new());
+    for _ in 0..4000 {
+        let obs = ocm_peg::rollout::observe(&mut scene, &ContactFeatures).unwrap();
+        let [l, _] = scene.sensed().unwrap();
+        raw.push(f64::from(
+            ContactFeatures.latent(&l.points_m, l.force_n).unwrap()[2],
+        ));
+        low.push(obs[4 + 2]);
+    }
+    let var = |v: &[f64]| {
+        let m = v.iter().sum::<f64>() / v.len() as f64;
+        v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64
+    };
+    let ratio = var(&low[100..]) / var(&raw[100..]);
+    let expected = a / (2.0 - a);
+    assert!(
+        (ratio - expected).abs() < 0.1 * expected,
+        "variance kept {ratio}, a / (2 - a) = {expected}"
+    );
+    let plain = SceneConfig {
+        touch_filter_s: 0.0,
+        ..c.clone()
+    };
+    let mut scene = PegScene::new(&plain, high(), InHandError::default()).unwrap();
+    assert_eq!(scene.low_pass(vec![3.0]), vec![3.0]);
+    assert_eq!(scene.low_pass(vec![5.0]), vec![5.0]);
+    let bad = SceneConfig {
+        touch_filter_s: -1.0,
+        ..c
+    };
+    let e = bad.validate().unwrap_err().to_string();
+    assert!(e.contains("touch_filter_s"), "{e}");
+}
