@@ -60,7 +60,7 @@ impl NpeEncoder {
             .enumerate()
             .find(|(_, p)| p.iter().any(|v| !v.is_finite()))
         {
-            return Err(crate::PegError::Invalid(format!(
+            return Err(crate::error::PegError::Invalid(format!(
                 "contact point {i} ({p:?}) is not finite"
             )));
         }

@@ -22,9 +22,10 @@ use ocm_learn::{UNet, values};
 use rayon::prelude::*;
 
 use super::infer::{
-    Map, Up, bias_of, check_batch, check_conv, conv3_f32, gelu, head_forward, head_weights,
-    max_pool, normal_cdf2_and_gauss,
+    Up, bias_of, check_batch, check_conv, conv3_f32, gelu, head_forward, head_weights, max_pool,
+    normal_cdf2_and_gauss,
 };
+use super::map::Map;
 use super::winograd::{self, Weights};
 use crate::{Result, TactileError};
 

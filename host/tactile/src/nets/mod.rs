@@ -8,6 +8,7 @@ pub mod bench;
 pub mod bf16;
 pub mod force;
 pub mod infer;
+mod map;
 pub mod pairs;
 pub mod plain_loss;
 pub mod real_frames;

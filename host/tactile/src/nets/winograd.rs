@@ -13,7 +13,7 @@ use faer::linalg::matmul::matmul;
 use faer::{Accum, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
-use super::infer::{Map, give, take};
+use super::map::{Map, give, take};
 
 /// Output pixels per tile side.
 const M: usize = 4;
