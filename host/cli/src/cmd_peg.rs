@@ -177,17 +177,12 @@ pub enum NoiseKind {
 impl NoiseKind {
     /// The errors of this kind, every deviation times `scale`.
     fn noise(self, scale: f64) -> SensorNoise {
-        let n = match self {
+        match self {
             NoiseKind::None => SensorNoise::default(),
             NoiseKind::Fem => SensorNoise::perception_on_fem(),
             NoiseKind::Real => SensorNoise::perception_on_real_frames(),
-        };
-        SensorNoise {
-            centroid_m: n.centroid_m * scale,
-            rotation_rad: n.rotation_rad * scale,
-            depth_m: n.depth_m * scale,
-            force_rel: n.force_rel * scale,
         }
+        .scaled(scale)
     }
 }
 

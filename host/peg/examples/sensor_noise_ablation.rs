@@ -39,11 +39,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ("centroid and rotation", real),
     ] {
         for scale in [0.25, 0.5, 1.0, 8.0] {
-            let noise = SensorNoise {
-                centroid_m: base.centroid_m * scale,
-                rotation_rad: base.rotation_rad * scale,
-                ..Default::default()
-            };
+            let noise = base.scaled(scale);
             let scene = SceneConfig {
                 sensor_noise: noise,
                 touch_filter_s: tau,

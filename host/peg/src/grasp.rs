@@ -9,6 +9,7 @@
 //! passes the pads' friction limit moves its rest position (the peg slips in the hand and stays
 //! where it slipped to).
 
+use ocm_fem::material::{check_elastic, lame};
 use rapier3d_f64::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -67,8 +68,9 @@ impl GraspCompliance {
     /// so the pads hold 2 mu N against sliding and 2 mu (N / A) int |r| dA against turning
     /// (uniform pressure). Critically damped.
     pub fn from_gel(g: &GelGrip) -> Result<Self> {
+        check_elastic(g.modulus_pa, g.poisson)
+            .map_err(|e| PegError::Invalid(format!("grasp gel: {e}")))?;
         for (name, v) in [
-            ("modulus_pa", g.modulus_pa),
             ("thickness_m", g.thickness_m),
             ("squeeze_m", g.squeeze_m),
             ("patch_width_m", g.patch_width_m),
@@ -77,13 +79,7 @@ impl GraspCompliance {
         ] {
             positive(&format!("grasp {name}"), v)?;
         }
-        if !(g.poisson.is_finite() && g.poisson > -1.0 && g.poisson < 0.5) {
-            return Err(PegError::Invalid(format!(
-                "grasp poisson = {} must lie in (-1, 0.5)",
-                g.poisson
-            )));
-        }
-        let shear_pa = g.modulus_pa / (2.0 * (1.0 + g.poisson));
+        let (shear_pa, _) = lame(g.modulus_pa, g.poisson);
         let (a, b) = (g.patch_width_m, g.patch_length_m);
         let area = a * b;
         let polar = area * (a * a + b * b) / 12.0;
@@ -112,19 +108,14 @@ impl GraspCompliance {
     }
 }
 
-/// Mean distance of a point of an a x b rectangle from its centre (midpoint rule, 200 x 200
-/// cells: within 1e-5 of the closed form).
+/// Mean distance of a point of an a x b rectangle from its centre: with half-sides p, q and
+/// d = sqrt(p^2 + q^2), the integral over a quarter is
+/// (2 p q d + p^3 ln((q + d) / p) + q^3 ln((p + d) / q)) / 6.
 fn mean_radius(a: f64, b: f64) -> f64 {
-    const N: usize = 200;
-    let mut sum = 0.0;
-    for i in 0..N {
-        let x = ((i as f64 + 0.5) / N as f64 - 0.5) * a;
-        for j in 0..N {
-            let y = ((j as f64 + 0.5) / N as f64 - 0.5) * b;
-            sum += x.hypot(y);
-        }
-    }
-    sum / (N * N) as f64
+    let (p, q) = (0.5 * a, 0.5 * b);
+    let d = p.hypot(q);
+    (2.0 * p * q * d + p.powi(3) * ((q + d) / p).ln() + q.powi(3) * ((p + d) / q).ln())
+        / (6.0 * p * q)
 }
 
 /// The peg's mass, kg, and its moment of inertia about the gripper's x axis through a point of

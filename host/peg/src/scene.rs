@@ -164,16 +164,13 @@ impl SceneConfig {
         self.sensor_noise.validate()
     }
 
-    /// Gel Poisson's ratio of the pads (`ocm-tactile`'s default for the DIGIT gel).
-    pub const GEL_POISSON: f64 = 0.45;
-
     /// The compliant grasp of this scene's gel pads on the peg's flats at the nominal in-hand
     /// pose (patch: one flat's width by the length of peg inside the pads), with gel-on-peg
-    /// friction coefficient `friction`.
+    /// friction coefficient `friction` and the tactile gel's Poisson's ratio.
     pub fn gel_grasp(&self, friction: f64) -> Result<GraspCompliance> {
         GraspCompliance::from_gel(&GelGrip {
             modulus_pa: self.gel_modulus_pa,
-            poisson: Self::GEL_POISSON,
+            poisson: ocm_tactile::gel::GelMaterial::default().poisson,
             thickness_m: self.gel_thickness_m,
             squeeze_m: self.squeeze_m,
             patch_width_m: self.peg_across_flats_m / 3f64.sqrt(),

@@ -56,6 +56,16 @@ impl SensorNoise {
         Self::from_median_errors(0.81e-3, 0.094)
     }
 
+    /// Every deviation times `factor`.
+    pub fn scaled(self, factor: f64) -> Self {
+        Self {
+            centroid_m: self.centroid_m * factor,
+            rotation_rad: self.rotation_rad * factor,
+            depth_m: self.depth_m * factor,
+            force_rel: self.force_rel * factor,
+        }
+    }
+
     /// Whether every deviation is zero (the exact contact).
     pub fn is_exact(&self) -> bool {
         *self == Self::default()
