@@ -32,6 +32,14 @@ pub fn non_negative(s: &str) -> Result<f64, String> {
     Ok(v)
 }
 
+/// A number at or above zero, or `inf` (a time that may be unbounded).
+pub fn non_negative_or_inf(s: &str) -> Result<f64, String> {
+    if matches!(s.trim(), "inf" | "infinity") {
+        return Ok(f64::INFINITY);
+    }
+    non_negative(s).map_err(|e| format!("{e}; or inf"))
+}
+
 /// A number in [0, 1] (a fraction).
 pub fn fraction(s: &str) -> Result<f64, String> {
     let v = number(s)?;

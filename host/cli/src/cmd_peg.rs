@@ -91,6 +91,10 @@ pub enum PegCommand {
         /// Multiplies every deviation of --sensor-noise.
         #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 1.0)]
         noise_scale: f64,
+        /// Correlation time of the sensor errors while a contact lasts, s (0: a fresh draw
+        /// each control step; inf: one draw per contact), instead of the policies' own.
+        #[arg(long, value_parser = crate::arg_check::non_negative_or_inf)]
+        noise_correlation_s: Option<f64>,
         /// Low-pass the latents with this time constant, s, instead of the policies' own.
         #[arg(long, value_parser = crate::arg_check::non_negative)]
         touch_filter_s: Option<f64>,
@@ -175,14 +179,16 @@ pub enum NoiseKind {
 }
 
 impl NoiseKind {
-    /// The errors of this kind, every deviation times `scale`.
-    fn noise(self, scale: f64) -> SensorNoise {
+    /// The errors of this kind, every deviation times `scale`, with correlation time
+    /// `correlation_s`.
+    fn noise(self, scale: f64, correlation_s: f64) -> SensorNoise {
         match self {
             NoiseKind::None => SensorNoise::default(),
             NoiseKind::Fem => SensorNoise::perception_on_fem(),
             NoiseKind::Real => SensorNoise::perception_on_real_frames(),
         }
         .scaled(scale)
+        .correlated(correlation_s)
     }
 }
 
@@ -202,6 +208,10 @@ pub struct SceneArgs {
     /// Multiplies every deviation of --sensor-noise.
     #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 1.0)]
     noise_scale: f64,
+    /// Correlation time of the --sensor-noise errors while a contact lasts, s (0: a fresh
+    /// draw each control step; inf: one draw per contact).
+    #[arg(long, value_parser = crate::arg_check::non_negative_or_inf, default_value_t = 0.0)]
+    noise_correlation_s: f64,
     /// Time constant of a first-order low-pass on each sensor's latent before the policy
     /// reads it, s (0: the latest reading alone).
     #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 0.0)]
@@ -275,7 +285,9 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 count,
                 seed,
                 scene: SceneConfig {
-                    sensor_noise: scene.sensor_noise.noise(scene.noise_scale),
+                    sensor_noise: scene
+                        .sensor_noise
+                        .noise(scene.noise_scale, scene.noise_correlation_s),
                     touch_filter_s: scene.touch_filter_s,
                     ..scene_with(scene.grasp, scene.pad_friction)?
                 },
@@ -373,6 +385,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             pad_friction,
             sensor_noise,
             noise_scale,
+            noise_correlation_s,
             touch_filter_s,
             json,
         } => {
@@ -400,7 +413,9 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 None => trained.clone(),
             };
             if let Some(kind) = sensor_noise {
-                scene.sensor_noise = kind.noise(noise_scale);
+                scene.sensor_noise = kind.noise(noise_scale, noise_correlation_s.unwrap_or(0.0));
+            } else if let Some(c) = noise_correlation_s {
+                scene.sensor_noise = scene.sensor_noise.correlated(c);
             }
             if let Some(tau) = touch_filter_s {
                 scene.touch_filter_s = tau;

@@ -137,6 +137,16 @@ fn zero_counts_and_non_finite_numbers_are_refused_naming_the_flag() {
         "--pad-friction",
         "greater than 0",
     );
+    refused_flag(
+        &["peg", "demos", "--out", "x", "--noise-correlation-s=-0.5"],
+        "--noise-correlation-s",
+        "must be 0 or more",
+    );
+    refused_flag(
+        &["peg", "eval", "x", "--noise-correlation-s", "nan"],
+        "--noise-correlation-s",
+        "finite",
+    );
     for args in [
         &["npe", "train", "--lr-final", "1.5"][..],
         &["learn", "train", "--lr-final=-0.1"],

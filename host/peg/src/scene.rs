@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use crate::contact::{GelFoundation, SensorContact, SensorFrame, pad_contact};
 use crate::error::{PegError, Result, finite, non_negative, positive};
 use crate::grasp::{GelGrip, Grasp, GraspCompliance, HeldPeg, peg_inertia};
-use crate::sensor::SensorNoise;
+use crate::sensor::{ErrorState, SensorNoise};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -269,6 +269,8 @@ pub struct PegScene {
     largest_shift: [f64; 3],
     /// The draws of the sensors' errors.
     sensor_rng: ChaCha8Rng,
+    /// Each sensor's current errors (for errors correlated in time).
+    sensor_errors: [ErrorState; 2],
     /// The low-passed latents of both sensors (None before the first reading).
     filtered: Option<Vec<f64>>,
     steps: usize,
@@ -460,6 +462,7 @@ impl PegScene {
             held,
             largest_shift: [0.0; 3],
             sensor_rng: ChaCha8Rng::seed_from_u64(SENSOR_SEED_SALT),
+            sensor_errors: [ErrorState::default(); 2],
             filtered: None,
             steps: 0,
         };
@@ -613,16 +616,20 @@ impl PegScene {
     pub fn seed_sensors(&mut self, seed: u64, stream: u64) {
         self.sensor_rng = ChaCha8Rng::seed_from_u64(seed ^ SENSOR_SEED_SALT);
         self.sensor_rng.set_stream(stream);
+        self.sensor_errors = [ErrorState::default(); 2];
     }
 
     /// What the left (0) and right (1) sensor report: the contact with the configuration's
-    /// sensor errors drawn afresh (the exact contact when there are none).
+    /// sensor errors, drawn afresh or carried on from the last reading by their correlation
+    /// time (the exact contact when there are none). Call once per control step.
     pub fn sensed(&mut self) -> Result<[SensorContact; 2]> {
         let [left, right] = self.contacts()?;
         let noise = self.config.sensor_noise;
+        let dt = self.config.control_dt_s();
+        let [el, er] = &mut self.sensor_errors;
         Ok([
-            noise.read(&left, &mut self.sensor_rng)?,
-            noise.read(&right, &mut self.sensor_rng)?,
+            noise.read_after(&left, el, dt, &mut self.sensor_rng)?,
+            noise.read_after(&right, er, dt, &mut self.sensor_rng)?,
         ])
     }
 

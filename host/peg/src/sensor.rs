@@ -4,10 +4,11 @@
 //! The rigid proxies give the exact contact. A DIGIT reads it through a camera and a perception
 //! network, whose errors the tactile crate measures (centroid and rotation errors of the
 //! perceived contact mask, on held-out FEM set-ups and on the real frames). This noise puts
-//! those errors on the exact patch, independently per sensor and control step.
+//! those errors on the exact patch, per sensor and control step: independent from step to step,
+//! or, with a correlation time, drifting slowly the way a network's error on one contact does.
 
 use rand::Rng;
-use rand_distr::{Distribution, Normal};
+use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 use crate::contact::SensorContact;
@@ -24,6 +25,49 @@ pub struct SensorNoise {
     pub depth_m: f64,
     /// Relative error of the normal force (forces stay at or above zero).
     pub force_rel: f64,
+    /// Correlation time of every error while a contact lasts, s: each follows a first-order
+    /// autoregression with the same spread (0: a fresh draw each reading; infinity: one draw
+    /// per contact). A new contact starts with a fresh draw. JSON has no infinity, so it is
+    /// stored as "inf".
+    #[serde(default, with = "seconds_or_inf")]
+    pub correlation_s: f64,
+}
+
+/// A duration in JSON as a number, or "inf" for an unbounded one (serde_json writes an
+/// infinite f64 as null, which does not read back).
+mod seconds_or_inf {
+    use serde::{Deserialize, Deserializer, Serializer, de::Error};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if *v == f64::INFINITY {
+            s.serialize_str("inf")
+        } else {
+            s.serialize_f64(*v)
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Repr {
+            Seconds(f64),
+            Word(String),
+        }
+        match Repr::deserialize(d)? {
+            Repr::Seconds(v) => Ok(v),
+            Repr::Word(w) if w == "inf" => Ok(f64::INFINITY),
+            Repr::Word(w) => Err(D::Error::custom(format!(
+                "expected a number of seconds or \"inf\", got {w:?}"
+            ))),
+        }
+    }
+}
+
+/// One sensor's current errors in units of their standard deviations (none between contacts).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ErrorState {
+    /// Shift along x and y, turn, depth, force.
+    unit: Option<[f64; 5]>,
 }
 
 /// A centroid error that is the median distance of a two-dimensional Gaussian shift is
@@ -41,6 +85,7 @@ impl SensorNoise {
             rotation_rad: rotation_rad / MEDIAN_ABS_PER_SIGMA,
             depth_m: 0.0,
             force_rel: 0.0,
+            correlation_s: 0.0,
         }
     }
 
@@ -63,12 +108,26 @@ impl SensorNoise {
             rotation_rad: self.rotation_rad * factor,
             depth_m: self.depth_m * factor,
             force_rel: self.force_rel * factor,
+            correlation_s: self.correlation_s,
+        }
+    }
+
+    /// The same deviations with correlation time `seconds`.
+    pub fn correlated(self, seconds: f64) -> Self {
+        Self {
+            correlation_s: seconds,
+            ..self
         }
     }
 
     /// Whether every deviation is zero (the exact contact).
     pub fn is_exact(&self) -> bool {
-        *self == Self::default()
+        [
+            self.centroid_m,
+            self.rotation_rad,
+            self.depth_m,
+            self.force_rel,
+        ] == [0.0; 4]
     }
 
     /// Checks every value, naming the first bad one.
@@ -81,24 +140,56 @@ impl SensorNoise {
         ] {
             non_negative(&format!("sensor noise {name}"), v)?;
         }
+        // Infinity is allowed here: one error per contact.
+        if self.correlation_s.is_nan() || self.correlation_s < 0.0 {
+            return Err(PegError::Invalid(format!(
+                "sensor noise correlation_s must be zero, positive or infinite, got {}",
+                self.correlation_s
+            )));
+        }
         Ok(())
     }
 
-    /// The reading of `exact` with one draw of the errors from `rng` (no contact reads as none:
-    /// the errors move a patch, they do not make one).
+    /// The reading of `exact` with one independent draw of the errors from `rng` (no contact
+    /// reads as none: the errors move a patch, they do not make one).
     pub fn read<R: Rng>(&self, exact: &SensorContact, rng: &mut R) -> Result<SensorContact> {
+        self.read_after(exact, &mut ErrorState::default(), 0.0, rng)
+    }
+
+    /// The reading of `exact` `dt_s` after the reading that left `state`: each error keeps
+    /// exp(-dt / correlation_s) of its last value in units of its deviation and draws the rest
+    /// (its spread stays the same); a reading without contact clears the state.
+    pub fn read_after<R: Rng>(
+        &self,
+        exact: &SensorContact,
+        state: &mut ErrorState,
+        dt_s: f64,
+        rng: &mut R,
+    ) -> Result<SensorContact> {
+        self.validate()?;
+        if !(dt_s >= 0.0 && dt_s.is_finite()) {
+            return Err(PegError::Invalid(format!(
+                "sensor reading interval must be a finite non-negative number of seconds, got {dt_s}"
+            )));
+        }
         if self.is_exact() || exact.points_m.is_empty() {
+            *state = ErrorState::default();
             return Ok(exact.clone());
         }
-        let mut draw = |sigma: f64| -> Result<f64> {
-            Ok(Normal::new(0.0, sigma)
-                .map_err(|e| PegError::Invalid(format!("sensor noise: {e}")))?
-                .sample(rng))
+        let fresh: [f64; 5] = std::array::from_fn(|_| StandardNormal.sample(rng));
+        let unit = match state.unit {
+            Some(last) if self.correlation_s > 0.0 => {
+                let keep = (-dt_s / self.correlation_s).exp();
+                let new = (1.0 - keep * keep).sqrt();
+                std::array::from_fn(|k| keep * last[k] + new * fresh[k])
+            }
+            _ => fresh,
         };
-        let (dx, dy) = (draw(self.centroid_m)?, draw(self.centroid_m)?);
-        let turn = draw(self.rotation_rad)?;
-        let dz = draw(self.depth_m)?;
-        let df = draw(self.force_rel)?;
+        state.unit = Some(unit);
+        let (dx, dy) = (self.centroid_m * unit[0], self.centroid_m * unit[1]);
+        let turn = self.rotation_rad * unit[2];
+        let dz = self.depth_m * unit[3];
+        let df = self.force_rel * unit[4];
         let n = exact.points_m.len() as f64;
         let cx = exact.points_m.iter().map(|p| p[0]).sum::<f64>() / n;
         let cy = exact.points_m.iter().map(|p| p[1]).sum::<f64>() / n;
@@ -167,6 +258,131 @@ mod tests {
         let (d, t) = (median(&mut dist), median(&mut turn));
         assert!((d - 0.5e-3).abs() < 0.04 * 0.5e-3, "median shift {d} m");
         assert!((t - 0.05).abs() < 0.04 * 0.05, "median turn {t} rad");
+    }
+
+    /// An unbounded correlation time goes through JSON and back; a word other than "inf" is
+    /// named.
+    #[test]
+    fn an_infinite_correlation_time_round_trips_through_json() {
+        for c in [0.0, 0.25, f64::INFINITY] {
+            let n = SensorNoise::perception_on_real_frames().correlated(c);
+            let text = serde_json::to_string(&n).unwrap();
+            assert_eq!(
+                serde_json::from_str::<SensorNoise>(&text).unwrap(),
+                n,
+                "{text}"
+            );
+        }
+        let old = r#"{"centroid_m":1e-4,"rotation_rad":0.0,"depth_m":0.0,"force_rel":0.0}"#;
+        assert_eq!(
+            serde_json::from_str::<SensorNoise>(old)
+                .unwrap()
+                .correlation_s,
+            0.0
+        );
+        let bad =
+            r#"{"centroid_m":0,"rotation_rad":0,"depth_m":0,"force_rel":0,"correlation_s":"long"}"#;
+        let e = serde_json::from_str::<SensorNoise>(bad)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("\"long\""), "{e}");
+    }
+
+    /// The patch's centroid in the sensor's plane.
+    fn centroid(c: &SensorContact) -> [f64; 2] {
+        let n = c.points_m.len() as f64;
+        [
+            c.points_m.iter().map(|p| p[0]).sum::<f64>() / n,
+            c.points_m.iter().map(|p| p[1]).sum::<f64>() / n,
+        ]
+    }
+
+    /// With a correlation time the shift is a first-order autoregression: its lag-one
+    /// correlation is exp(-dt / tau) and its spread that of the independent draws.
+    #[test]
+    fn correlated_errors_keep_exp_minus_dt_over_tau_of_the_last_one() {
+        let (dt, tau) = (1.0 / 60.0, 0.1);
+        let noise = SensorNoise::from_median_errors(0.5e-3, 0.05).correlated(tau);
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut state = ErrorState::default();
+        let xs: Vec<f64> = (0..40_000)
+            .map(|_| {
+                centroid(
+                    &noise
+                        .read_after(&strip(), &mut state, dt, &mut rng)
+                        .unwrap(),
+                )[0]
+            })
+            .collect();
+        let n = xs.len() as f64;
+        let mean = xs.iter().sum::<f64>() / n;
+        let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
+        let lag1 = xs
+            .windows(2)
+            .map(|w| (w[0] - mean) * (w[1] - mean))
+            .sum::<f64>()
+            / (n - 1.0)
+            / var;
+        let want = (-dt / tau).exp();
+        assert!(
+            (lag1 - want).abs() < 0.01,
+            "lag-one correlation {lag1}, want {want}"
+        );
+        let sigma = noise.centroid_m;
+        assert!(
+            (var.sqrt() - sigma).abs() < 0.05 * sigma,
+            "spread {} m, want {sigma} m",
+            var.sqrt()
+        );
+    }
+
+    /// Without a correlation time a reading is `read`'s independent draw; with an infinite one
+    /// the error holds while the contact lasts, and a new contact draws a new one.
+    #[test]
+    fn zero_correlation_is_independent_and_infinite_holds_per_contact() {
+        let real = SensorNoise::perception_on_real_frames();
+        let (mut a, mut b) = (ChaCha8Rng::seed_from_u64(5), ChaCha8Rng::seed_from_u64(5));
+        let mut state = ErrorState::default();
+        for _ in 0..20 {
+            assert_eq!(
+                real.read(&strip(), &mut a).unwrap(),
+                real.read_after(&strip(), &mut state, 0.01, &mut b).unwrap()
+            );
+        }
+        let held = real.correlated(f64::INFINITY);
+        let mut rng = ChaCha8Rng::seed_from_u64(6);
+        let mut state = ErrorState::default();
+        let first = held
+            .read_after(&strip(), &mut state, 0.01, &mut rng)
+            .unwrap();
+        for _ in 0..10 {
+            let r = held
+                .read_after(&strip(), &mut state, 0.01, &mut rng)
+                .unwrap();
+            assert_eq!(r, first);
+        }
+        let none = SensorContact::default();
+        assert_eq!(
+            held.read_after(&none, &mut state, 0.01, &mut rng).unwrap(),
+            none
+        );
+        let next = held
+            .read_after(&strip(), &mut state, 0.01, &mut rng)
+            .unwrap();
+        assert_ne!(centroid(&next), centroid(&first));
+        for bad in [f64::NAN, -1.0] {
+            let e = real
+                .correlated(bad)
+                .read_after(&strip(), &mut state, 0.01, &mut rng)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("correlation_s"), "{e}");
+        }
+        let e = real
+            .read_after(&strip(), &mut state, f64::NAN, &mut rng)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("interval"), "{e}");
     }
 
     #[test]

@@ -216,6 +216,49 @@ fn sensor_errors_are_seeded_per_trial_and_move_only_the_reading() {
     assert!((a[0].0[5] - z[5]).abs() < 1e-4 && a[0].0[9] == z[9]);
 }
 
+/// With an infinite correlation time each sensor keeps one error while its contact lasts (the
+/// reading's centroid sits at the same offset from the exact one every step), and seeding the
+/// sensors for a trial starts it afresh.
+#[test]
+fn correlated_sensor_errors_hold_through_a_contact_and_restart_with_the_trial() {
+    let c = SceneConfig {
+        sensor_noise: ocm_peg::SensorNoise::perception_on_real_frames().correlated(f64::INFINITY),
+        ..SceneConfig::default()
+    };
+    let centroid = |p: &[[f64; 3]]| {
+        let n = p.len() as f64;
+        [
+            p.iter().map(|q| q[0]).sum::<f64>() / n,
+            p.iter().map(|q| q[1]).sum::<f64>() / n,
+        ]
+    };
+    let offsets = |scene: &mut PegScene| {
+        let exact = scene.contacts().unwrap();
+        let read = scene.sensed().unwrap();
+        [0, 1].map(|k| {
+            let (e, r) = (centroid(&exact[k].points_m), centroid(&read[k].points_m));
+            [r[0] - e[0], r[1] - e[1]]
+        })
+    };
+    let mut scene = PegScene::new(&c, high(), InHandError::default()).unwrap();
+    scene.seed_sensors(5, 0);
+    let first = offsets(&mut scene);
+    assert!(first[0][0].hypot(first[0][1]) > 1e-6, "{first:?}");
+    assert_ne!(first[0], first[1], "each sensor has its own error");
+    let same = |a: [[f64; 2]; 2], b: [[f64; 2]; 2]| {
+        (0..4).all(|i| (a[i / 2][i % 2] - b[i / 2][i % 2]).abs() < 1e-12)
+    };
+    for _ in 0..5 {
+        scene.step([0.0; 4]).unwrap();
+        let now = offsets(&mut scene);
+        assert!(same(now, first), "{now:?} {first:?}");
+    }
+    scene.seed_sensors(5, 0);
+    assert!(same(offsets(&mut scene), first));
+    scene.seed_sensors(5, 1);
+    assert!(!same(offsets(&mut scene), first));
+}
+
 /// The low-pass on the latents: a step from 0 to 1 reaches 1 - (1 - a)^k after k control steps
 /// (a = dt / (tau + dt)); white reading errors keep a / (2 - a) of their variance; no time
 /// constant passes the reading through.
