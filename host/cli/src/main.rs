@@ -19,6 +19,7 @@ mod cmd_tactile;
 mod cmd_tactile_net;
 mod cmd_track;
 mod heap;
+mod pipe;
 mod plot;
 mod plot_track;
 mod progress;
@@ -71,6 +72,7 @@ enum Command {
 
 fn main() -> std::process::ExitCode {
     heap::keep_freed_memory();
+    pipe::end_quietly_when_the_reader_leaves();
     match run(Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
