@@ -349,10 +349,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             let digit = ocm_datadir::data_file(data.as_deref(), "digit")?;
             let gel = Gel::digit(
                 digit.join(&ds.manifest.mesh),
-                GelMaterial {
-                    young_pa: ds.manifest.material[0],
-                    poisson: ds.manifest.material[1],
-                },
+                GelMaterial::new(ds.manifest.material[0], ds.manifest.material[1]),
             )?;
             let top = TopSurface::from_gel(&gel);
             anyhow::ensure!(

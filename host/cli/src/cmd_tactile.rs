@@ -3,7 +3,7 @@
 use crate::plot::{Chart, Series};
 use crate::progress::bar;
 use anyhow::{Context, bail};
-use ocm_tactile::gel::{Gel, GelMaterial, Skin};
+use ocm_tactile::gel::{Gel, GelMaterial, Skin, VolumetricLaw};
 use ocm_tactile::image_io::read_gray;
 use ocm_tactile::indent::{IndentOptions, Indentation};
 use ocm_tactile::indenter::Indenter;
@@ -32,6 +32,24 @@ pub enum DatasetModel {
 }
 
 /// Tactile subcommands.
+/// The gel law's volumetric part for `indent`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum VolumetricArg {
+    /// Eq 5.6: kappa/2 (J - 1)^2 beside the isochoric Neo-Hookean term.
+    Bulk,
+    /// Eq 2.1: -mu ln J + lambda/2 (ln J)^2 beside mu/2 (I1 - 3).
+    LogJ,
+}
+
+impl VolumetricArg {
+    fn law(self) -> VolumetricLaw {
+        match self {
+            VolumetricArg::Bulk => VolumetricLaw::Bulk,
+            VolumetricArg::LogJ => VolumetricLaw::LogJ,
+        }
+    }
+}
+
 #[derive(clap::Subcommand, Debug)]
 pub enum TactileCommand {
     /// Presses an indenter of the set-up files into the gel in equal depth steps (default: 100
@@ -62,6 +80,10 @@ pub enum TactileCommand {
         /// Poisson's ratio of the gel.
         #[arg(long, default_value_t = 0.45)]
         poisson: f64,
+        /// The gel law's volumetric part: eq 5.6's bulk term, or eq 2.1's ln J terms (the same
+        /// small-strain E and nu, far stiffer under strong compression).
+        #[arg(long, value_enum, default_value = "bulk")]
+        volumetric: VolumetricArg,
         /// Crown of the gel's top face: radius of curvature of a dome centred on the top face,
         /// mm (0: the flat mesh). `compare-real` fits 14 mm on the real edge6 frames.
         #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 0.0)]
@@ -331,6 +353,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
             friction,
             young_pa,
             poisson,
+            volumetric,
             crown_radius_mm,
             skin_um,
             skin_stiffness,
@@ -351,7 +374,10 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 MeshArg::Fine => "DIGIT_v8.vtk",
                 MeshArg::Coarse => "DIGIT_remesh2.vtk",
             };
-            let material = GelMaterial { young_pa, poisson };
+            let material = GelMaterial {
+                volumetric: volumetric.law(),
+                ..GelMaterial::new(young_pa, poisson)
+            };
             let layer = skin(skin_um, skin_stiffness);
             let gel = crowned_gel(
                 &digit.join(mesh_file),
@@ -422,6 +448,7 @@ pub fn run(cmd: TactileCommand) -> anyhow::Result<()> {
                 "indenter": indenter.name,
                 "mesh": mesh_file,
                 "crown_radius_mm": crown_radius_mm,
+                "volumetric": material.volumetric,
                 "skin_um": layer.thickness_m * 1e6,
                 "skin_stiffness": layer.stiffness_ratio,
                 "skin_elements": skin_elements,

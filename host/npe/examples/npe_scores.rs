@@ -21,10 +21,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let digit = ocm_datadir::data_file(None, "digit")?;
     let gel = Gel::digit(
         digit.join(&ds.manifest.mesh),
-        GelMaterial {
-            young_pa: ds.manifest.material[0],
-            poisson: ds.manifest.material[1],
-        },
+        GelMaterial::new(ds.manifest.material[0], ds.manifest.material[1]),
     )?;
     let top = TopSurface::from_gel(&gel);
     let k = fit_stiffness(

@@ -121,7 +121,7 @@ pub fn quarter_block(
         [l_m * g(u[0]), l_m * g(u[1]), h_m * (1.0 - g(1.0 - u[2]))]
     });
     let tol = 1e-12;
-    crate::gel::Gel::with_constraints(mesh, crate::gel::GelMaterial { young_pa, poisson }, |p| {
+    crate::gel::Gel::with_constraints(mesh, crate::gel::GelMaterial::new(young_pa, poisson), |p| {
         [p.x < tol, p.y < tol, p.z < tol]
     })
 }
@@ -177,9 +177,11 @@ pub fn shell_quarter_block(
         place([s * i as f64 / mf, s * j as f64 / mf, s])
     });
     let tol = 1e-12;
-    crate::gel::Gel::with_constraints(b.mesh, crate::gel::GelMaterial { young_pa, poisson }, |p| {
-        [p.x < tol, p.y < tol, p.z < tol]
-    })
+    crate::gel::Gel::with_constraints(
+        b.mesh,
+        crate::gel::GelMaterial::new(young_pa, poisson),
+        |p| [p.x < tol, p.y < tol, p.z < tol],
+    )
 }
 
 /// Structured hex blocks split into six tets each, merged where their nodes coincide.

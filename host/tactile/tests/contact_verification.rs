@@ -115,15 +115,7 @@ fn flat_punch() {
 /// A 4 x 4 x 2 mm block with its base clamped.
 fn small_block() -> Gel {
     let mesh = ocm_fem::mesh::generate::box_mesh([8, 8, 4], [4e-3, 4e-3, 2e-3]);
-    Gel::from_mesh(
-        mesh,
-        GelMaterial {
-            young_pa: E,
-            poisson: NU,
-        },
-        1e-9,
-    )
-    .unwrap()
+    Gel::from_mesh(mesh, GelMaterial::new(E, NU), 1e-9).unwrap()
 }
 
 /// Above the gel nothing happens: zero force, zero displacement, no active node.
@@ -209,10 +201,7 @@ fn friction_against_frictionless_on_a_tilted_face() {
 #[test]
 fn a_crowned_gel_is_pressed_from_its_apex_outwards() {
     use ocm_tactile::gel::Crown;
-    let material = GelMaterial {
-        young_pa: E,
-        poisson: NU,
-    };
+    let material = GelMaterial::new(E, NU);
     let apex = [2e-3, 2e-3];
     let radius = 10e-3;
     let flat = ocm_fem::mesh::generate::box_mesh([8, 8, 4], [4e-3, 4e-3, 2e-3]);

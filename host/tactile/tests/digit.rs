@@ -321,7 +321,7 @@ fn out_of_range_parameters_are_refused() {
         (0.3e6, 0.5, "Poisson's ratio"),
         (0.3e6, f64::NAN, "Poisson's ratio"),
     ] {
-        let e = Gel::digit(&mesh, GelMaterial { young_pa, poisson })
+        let e = Gel::digit(&mesh, GelMaterial::new(young_pa, poisson))
             .expect_err("refused")
             .to_string();
         assert!(e.contains(what), "{e}");
