@@ -31,7 +31,6 @@ pub enum DatasetModel {
     Reduced,
 }
 
-/// Tactile subcommands.
 /// The gel law's volumetric part for `indent`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum VolumetricArg {
@@ -50,6 +49,7 @@ impl VolumetricArg {
     }
 }
 
+/// Tactile subcommands.
 #[derive(clap::Subcommand, Debug)]
 pub enum TactileCommand {
     /// Presses an indenter of the set-up files into the gel in equal depth steps (default: 100

@@ -132,13 +132,14 @@ impl SensorNoise {
 
     /// Checks every value, naming the first bad one.
     pub fn validate(&self) -> Result<()> {
+        // Whole names, not formatted ones: `read_after` checks on every reading.
         for (name, v) in [
-            ("centroid_m", self.centroid_m),
-            ("rotation_rad", self.rotation_rad),
-            ("depth_m", self.depth_m),
-            ("force_rel", self.force_rel),
+            ("sensor noise centroid_m", self.centroid_m),
+            ("sensor noise rotation_rad", self.rotation_rad),
+            ("sensor noise depth_m", self.depth_m),
+            ("sensor noise force_rel", self.force_rel),
         ] {
-            non_negative(&format!("sensor noise {name}"), v)?;
+            non_negative(name, v)?;
         }
         // Infinity is allowed here: one error per contact.
         if self.correlation_s.is_nan() || self.correlation_s < 0.0 {
