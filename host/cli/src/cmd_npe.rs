@@ -125,6 +125,11 @@ pub enum NpeCommand {
         /// Field images per group.
         #[arg(long, default_value_t = 4)]
         images: usize,
+        /// Test-time symmetrisation: also run the engine on each sample turned and/or mirrored
+        /// (comma-separated: rot180, mirror-x, mirror-y) and average the outputs mapped back
+        /// (one more engine call per map).
+        #[arg(long, value_delimiter = ',')]
+        symmetrise: Vec<ocm_npe::symmetry::Symmetry>,
         /// Print JSON.
         #[arg(long)]
         json: bool,
@@ -343,6 +348,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             data,
             out,
             images,
+            symmetrise,
             json,
         } => {
             let (npe, split, ds, p) = load_with_data(&model, &dataset)?;
@@ -386,6 +392,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
                     &Extra {
                         stiffness: Some(&stiffness),
                         thresholds_m: &[],
+                        symmetrise: &symmetrise,
                     },
                 )?;
                 let stem = name.replace([' ', '-'], "_");
@@ -446,6 +453,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
                 summary.insert(name.to_string(), serde_json::to_value(&scores)?);
             }
             summary.insert("model".into(), model.display().to_string().into());
+            summary.insert("symmetrise".into(), serde_json::to_value(&symmetrise)?);
             summary.insert("split".into(), serde_json::to_value(&split)?);
             let summary = serde_json::Value::Object(summary);
             write_json(&out.join("scores.json"), &summary)?;

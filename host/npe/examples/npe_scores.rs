@@ -47,6 +47,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &Extra {
                 stiffness: Some(&k),
                 thresholds_m: &thresholds,
+                symmetrise: &[],
             },
         )?;
         let at: Vec<f64> = (0..thresholds.len())

@@ -360,6 +360,20 @@ pub struct Prepared {
 }
 
 impl Prepared {
+    /// A copy of everything but the samples (set-ups, top face, grid), with none.
+    pub fn without_samples(&self) -> Self {
+        Self {
+            setup_names: self.setup_names.clone(),
+            setup_unseen: self.setup_unseen.clone(),
+            samples: Vec::new(),
+            without_points: 0,
+            rest_m: self.rest_m.clone(),
+            edges: self.edges.clone(),
+            spacing_m: self.spacing_m,
+            locator: self.locator.clone(),
+        }
+    }
+
     /// Scales every sample's targets with `scales`.
     pub fn from_dataset(ds: &Dataset, scales: &Scales) -> Self {
         let mut samples = Vec::new();

@@ -11,7 +11,9 @@ use serde::{Deserialize, Serialize};
 use crate::Result;
 use crate::data::Prepared;
 use crate::engine::{Fields, Npe, contact_state};
+use crate::model::Inputs;
 use crate::stiffness::ForceFromDisplacement;
+use crate::symmetry::{Symmetry, map_sample, permutation};
 
 /// Major over minor second moment of a contact patch above which its orientation counts: a
 /// rounder patch has no axis to recover.
@@ -238,6 +240,87 @@ pub fn breakdown(
     c
 }
 
+/// The engine run on samples and on their images under maps of the top face, with the
+/// images' outputs mapped back and averaged (test-time symmetrisation). Over the whole group
+/// (identity, half turn and both mirrors) the averaged engine is equivariant, whatever its
+/// weights.
+pub struct Symmetrised {
+    /// Each distinct map with its node permutation.
+    maps: Vec<(Symmetry, Vec<usize>)>,
+}
+
+impl Symmetrised {
+    /// The maps `symmetrise` (repeats dropped) on the top face of `p`; an error when the face
+    /// is not symmetric under one of them.
+    pub fn new(p: &Prepared, symmetrise: &[Symmetry]) -> Result<Self> {
+        let mut maps: Vec<(Symmetry, Vec<usize>)> = Vec::new();
+        for &s in symmetrise {
+            if !maps.iter().any(|(m, _)| *m == s) {
+                maps.push((s, permutation(&p.rest_m, s)?));
+            }
+        }
+        Ok(Self { maps })
+    }
+
+    /// Outputs (6 per node: scaled u and f, node v of sample j at `v * b + j`) and contact
+    /// logits on the samples `idx` of `p`, whose inputs are `x`, averaged with their images'.
+    pub fn forward(
+        &self,
+        npe: &Npe,
+        p: &Prepared,
+        idx: &[usize],
+        x: &Inputs,
+    ) -> (Vec<f32>, Option<Vec<f32>>) {
+        let (pos, graph, device) = npe.parts();
+        let (out, logits, _) = npe.net().forward_full(&npe.config, x, pos, graph, device);
+        let mut out = values(out);
+        let mut logits = logits.map(values);
+        if self.maps.is_empty() {
+            return (out, logits);
+        }
+        let b = idx.len();
+        let c = Prepared::top_center(&p.rest_m);
+        for (map, perm) in &self.maps {
+            let images = Prepared {
+                samples: idx
+                    .iter()
+                    .map(|&i| map_sample(&p.samples[i], *map, [c[0], c[1]], perm))
+                    .collect(),
+                ..p.without_samples()
+            };
+            let all: Vec<usize> = (0..b).collect();
+            let xi = images.inputs(&npe.config, &all);
+            let (oi, li, _) = npe.net().forward_full(&npe.config, &xi, pos, graph, device);
+            // Node v's prediction sits at its image node perm[v], mapped (maps are involutions).
+            let oi = values(oi);
+            for (v, &w) in perm.iter().enumerate() {
+                for j in 0..b {
+                    let (to, from) = ((v * b + j) * 6, (w * b + j) * 6);
+                    for off in [0, 3] {
+                        let w = map.vector([0, 1, 2].map(|q| f64::from(oi[from + off + q])));
+                        for q in 0..3 {
+                            out[to + off + q] += w[q] as f32;
+                        }
+                    }
+                }
+            }
+            if let (Some(l), Some(li)) = (logits.as_mut(), li.map(values)) {
+                for (v, &w) in perm.iter().enumerate() {
+                    for j in 0..b {
+                        l[v * b + j] += li[w * b + j];
+                    }
+                }
+            }
+        }
+        let share = 1.0 / (1 + self.maps.len()) as f32;
+        out.iter_mut().for_each(|o| *o *= share);
+        if let Some(l) = logits.as_mut() {
+            l.iter_mut().for_each(|o| *o *= share);
+        }
+        (out, logits)
+    }
+}
+
 /// Scores the engine on the samples `idx` of `p` against the FEM fields, in batches of
 /// `batch`. `gel` and `top` are the mesh the dataset was made on (for the contact masks).
 pub fn evaluate(
@@ -259,6 +342,10 @@ pub struct Extra<'a> {
     pub stiffness: Option<&'a ForceFromDisplacement>,
     /// Thresholds on the predicted -u_z for [`SampleScore::contact_accuracy_at`], m.
     pub thresholds_m: &'a [f64],
+    /// Test-time symmetrisation: the engine also runs on each sample's image under these
+    /// maps of the top face, and its outputs (fields and contact logits) are mapped back and
+    /// averaged with the plain one's.
+    pub symmetrise: &'a [Symmetry],
 }
 
 /// [`evaluate`], and what `extra` asks for: the total force read from the predicted
@@ -275,16 +362,14 @@ pub fn evaluate_with(
     let (stiffness, thresholds_m) = (extra.stiffness, extra.thresholds_m);
     let grid = Grid::for_gel(gel);
     let n = p.rest_m.len();
-    let (pos, graph, device) = npe.parts();
     let mut per = Vec::new();
     let mut pooled = 0.0;
     let mut nodal_sq = [0.0; 2];
     let mut nodal_count = [0usize; 2];
+    let maps = Symmetrised::new(p, extra.symmetrise)?;
     for chunk in idx.chunks(batch.max(1)) {
         let x = p.inputs(&npe.config, chunk);
-        let (out, logits, _) = npe.net().forward_full(&npe.config, &x, pos, graph, device);
-        let out = values(out);
-        let logits = logits.map(values);
+        let (out, logits) = maps.forward(npe, p, chunk, &x);
         let b = chunk.len();
         for (j, &i) in chunk.iter().enumerate() {
             let s = &p.samples[i];

@@ -255,15 +255,11 @@ fn plain_kernel_computes_what_the_burn_network_computes() {
         (true, false, false),
         (true, true, true),
     ] {
-        let s = surface();
-        let mut cfg = NpeConfig::new(Prepared::top_center(&s.rest_m), 0.25e-3);
-        cfg.layers = 3;
-        cfg.width = 12;
-        cfg.use_geometry = geometry;
-        cfg.use_force = force;
-        cfg.contact_prior = prior;
-        let net = cfg.init(&cpu(), 9).unwrap();
-        let npe = Npe::new(net, cfg, s).unwrap();
+        let npe = common::small_engine(surface(), 3, 9, |cfg| {
+            cfg.use_geometry = geometry;
+            cfg.use_force = force;
+            cfg.contact_prior = prior;
+        });
         let pts = cap(3.2e-3, 2.4e-3, 0.4e-3);
         let (a, ha) = npe.predict_scaled(&pts, 1.5, 0.4e-3).unwrap();
         let (b, hb) = npe.predict_scaled_burn(&pts, 1.5, 0.4e-3).unwrap();

@@ -219,3 +219,140 @@ fn augmented_training_adds_the_images_of_the_training_set_ups_only() {
     assert_eq!(q.samples[21].setup, 1);
     assert!(symmetry::augmented(&p, &[99], &[Symmetry::MirrorY]).is_err());
 }
+
+/// Largest difference between the outputs of sample `at[0]` of batch `a` (6 per node,
+/// node-major) and those of its image, sample `at[1]` of batch `b`, under `sym` (node `perm[v]`
+/// mapped), over the largest output.
+fn equivariance_gap(
+    a: &(Vec<f32>, Option<Vec<f32>>),
+    b: &(Vec<f32>, Option<Vec<f32>>),
+    batch: [usize; 2],
+    at: [usize; 2],
+    sym: Symmetry,
+    perm: &[usize],
+) -> f64 {
+    let (ba, bb) = (batch[0], batch[1]);
+    let (j, k) = (at[0], at[1]);
+    let mut gap = 0.0f64;
+    let mut scale = 0.0f64;
+    for (v, &w) in perm.iter().enumerate() {
+        for off in [0, 3] {
+            let x = [0, 1, 2].map(|q| f64::from(a.0[(v * ba + j) * 6 + off + q]));
+            let y = sym.vector([0, 1, 2].map(|q| f64::from(b.0[(w * bb + k) * 6 + off + q])));
+            for q in 0..3 {
+                gap = gap.max((x[q] - y[q]).abs());
+                scale = scale.max(x[q].abs());
+            }
+        }
+        if let (Some(la), Some(lb)) = (&a.1, &b.1) {
+            let (x, y) = (f64::from(la[v * ba + j]), f64::from(lb[w * bb + k]));
+            gap = gap.max((x - y).abs());
+            scale = scale.max(x.abs());
+        }
+    }
+    gap / scale.max(1e-12)
+}
+
+/// Test-time symmetrisation (`eval::Symmetrised`, `ocm npe eval --symmetrise`): averaged over
+/// the whole group the engine answers a mirrored or turned indentation with the mirrored or
+/// turned field and contact logits, for any weights (here untrained ones on a face whose
+/// triangulation the mirrors change); one map alone buys that map's equivariance only; the
+/// plain engine has none; a batch scores each sample as alone.
+#[test]
+fn symmetrised_engine_is_equivariant_under_the_whole_group() {
+    use ocm_npe::eval::Symmetrised;
+
+    let (rest, edges) = grid(None);
+    let mut samples = Vec::new();
+    for (k, (c, t)) in [([1.2e-3, 1.0e-3], 0.6), ([2.6e-3, 2.1e-3], 2.2)]
+        .into_iter()
+        .enumerate()
+    {
+        samples.push(dent(&rest, c, [f64::cos(t), f64::sin(t)], 0.25e-3, k));
+    }
+    let p = prepared(rest.clone(), edges.clone(), samples);
+    let npe = common::small_engine(
+        Surface {
+            rest_m: rest,
+            edges,
+        },
+        2,
+        3,
+        |cfg| {
+            cfg.contact_prior = true;
+            cfg.node_gap = true;
+            cfg.contact_head = true;
+        },
+    );
+    let centre = Prepared::top_center(&p.rest_m);
+    let run = |maps: &[Symmetry], q: &Prepared, idx: &[usize]| {
+        let x = q.inputs(&npe.config, idx);
+        Symmetrised::new(q, maps).unwrap().forward(&npe, q, idx, &x)
+    };
+    let both = [0, 1];
+    let whole = run(&Symmetry::ALL, &p, &both);
+    assert!(
+        whole.1.is_some(),
+        "the contact head's logits are averaged too"
+    );
+    for sym in Symmetry::ALL {
+        let perm = symmetry::permutation(&p.rest_m, sym).unwrap();
+        let images = Prepared {
+            samples: p
+                .samples
+                .iter()
+                .map(|s| symmetry::map_sample(s, sym, [centre[0], centre[1]], &perm))
+                .collect(),
+            ..p.without_samples()
+        };
+        // The images alone, one at a time: batch 2 against batch 1 crosses the node-major layout.
+        for j in 0..2 {
+            let image_whole = run(&Symmetry::ALL, &images, &[j]);
+            let gap = equivariance_gap(&whole, &image_whole, [2, 1], [j, 0], sym, &perm);
+            assert!(gap < 1e-5, "{sym}, sample {j}: symmetrised gap {gap:.3e}");
+            let plain = equivariance_gap(
+                &run(&[], &p, &both),
+                &run(&[], &images, &[j]),
+                [2, 1],
+                [j, 0],
+                sym,
+                &perm,
+            );
+            assert!(
+                plain > 1e-3,
+                "{sym}, sample {j}: the plain engine's gap is {plain:.3e}"
+            );
+        }
+        let own = equivariance_gap(
+            &run(&[sym], &p, &both),
+            &run(&[sym], &images, &both),
+            [2, 2],
+            [1, 1],
+            sym,
+            &perm,
+        );
+        assert!(own < 1e-5, "{sym} alone: gap {own:.3e} under {sym}");
+        let other = if sym == Symmetry::Rot180 {
+            Symmetry::MirrorX
+        } else {
+            Symmetry::Rot180
+        };
+        let wrong = equivariance_gap(
+            &run(&[other], &p, &both),
+            &run(&[other], &images, &both),
+            [2, 2],
+            [1, 1],
+            sym,
+            &perm,
+        );
+        assert!(
+            wrong > 1e-3,
+            "{other} alone is equivariant under {sym}: {wrong:.3e}"
+        );
+    }
+    let e = Symmetrised::new(
+        &prepared(grid(Some(3)).0, grid(Some(3)).1, Vec::new()),
+        &[Symmetry::MirrorY],
+    );
+    assert!(e.is_err(), "an asymmetric face is refused");
+}

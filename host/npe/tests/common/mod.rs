@@ -28,3 +28,21 @@ pub fn grid_surface(nx: usize, ny: usize, spacing_m: f64, z_m: f64) -> Surface {
     }
     Surface { rest_m, edges }
 }
+
+/// An untrained engine of width 12 with `layers` GCN layers on `surface`, its configuration
+/// adjusted by `set` before the weights are drawn from `seed`.
+#[allow(dead_code)] // not every test binary builds engines
+pub fn small_engine(
+    surface: Surface,
+    layers: usize,
+    seed: u64,
+    set: impl FnOnce(&mut ocm_npe::model::NpeConfig),
+) -> ocm_npe::Npe {
+    let centre = ocm_npe::data::Prepared::top_center(&surface.rest_m);
+    let mut cfg = ocm_npe::model::NpeConfig::new(centre, 0.25e-3);
+    cfg.layers = layers;
+    cfg.width = 12;
+    set(&mut cfg);
+    let net = cfg.init(&ocm_learn::cpu(), seed).unwrap();
+    ocm_npe::Npe::new(net, cfg, surface).unwrap()
+}
