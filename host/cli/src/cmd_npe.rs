@@ -49,6 +49,11 @@ pub enum NpeCommand {
         /// Seed of weights, split and shuffling.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Seed of the weights and the shuffling only (--seed still splits): engines of one
+        /// split that differ in their training run, e.g. members of an ensemble for `eval
+        /// --ensemble`.
+        #[arg(long)]
+        weight_seed: Option<u64>,
         /// Seen set-ups held out for the test.
         #[arg(long, default_value_t = 8)]
         test_setups: usize,
@@ -130,6 +135,10 @@ pub enum NpeCommand {
         /// (one more engine call per map).
         #[arg(long, value_delimiter = ',')]
         symmetrise: Vec<ocm_npe::symmetry::Symmetry>,
+        /// More checkpoints of the same split (comma-separated; e.g. `train --weight-seed`
+        /// runs) whose outputs are averaged with --model's: an ensemble.
+        #[arg(long, value_delimiter = ',')]
+        ensemble: Vec<PathBuf>,
         /// Print JSON.
         #[arg(long)]
         json: bool,
@@ -259,6 +268,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             width,
             layers,
             seed,
+            weight_seed,
             test_setups,
             val_setups,
             lambda_total,
@@ -292,6 +302,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
                 learning_rate: lr,
                 patience,
                 seed,
+                weight_seed,
                 use_geometry: !no_geometry,
                 use_force: !no_force,
                 width,
@@ -349,9 +360,26 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             out,
             images,
             symmetrise,
+            ensemble,
             json,
         } => {
             let (npe, split, ds, p) = load_with_data(&model, &dataset)?;
+            let mut members = Vec::new();
+            for path in &ensemble {
+                // A member of another split has trained on this one's held-out set-ups.
+                let theirs =
+                    split_of(path).with_context(|| format!("--ensemble {}", path.display()))?;
+                anyhow::ensure!(
+                    theirs == split,
+                    "--ensemble {}: trained on another split than --model {} (same --seed, \
+                     --test-setups, --val-setups and dataset needed)",
+                    path.display(),
+                    model.display()
+                );
+                members.push(
+                    Npe::load(path).with_context(|| format!("--ensemble {}", path.display()))?,
+                );
+            }
             let digit = ocm_datadir::data_file(data.as_deref(), "digit")?;
             let gel = Gel::digit(
                 digit.join(&ds.manifest.mesh),
@@ -393,6 +421,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
                         stiffness: Some(&stiffness),
                         thresholds_m: &[],
                         symmetrise: &symmetrise,
+                        ensemble: &members,
                     },
                 )?;
                 let stem = name.replace([' ', '-'], "_");
@@ -454,6 +483,7 @@ pub fn run(cmd: NpeCommand) -> anyhow::Result<()> {
             }
             summary.insert("model".into(), model.display().to_string().into());
             summary.insert("symmetrise".into(), serde_json::to_value(&symmetrise)?);
+            summary.insert("ensemble".into(), serde_json::to_value(&ensemble)?);
             summary.insert("split".into(), serde_json::to_value(&split)?);
             let summary = serde_json::Value::Object(summary);
             write_json(&out.join("scores.json"), &summary)?;

@@ -48,6 +48,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 stiffness: Some(&k),
                 thresholds_m: &thresholds,
                 symmetrise: &[],
+                ensemble: &[],
             },
         )?;
         let at: Vec<f64> = (0..thresholds.len())

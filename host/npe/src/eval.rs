@@ -346,6 +346,9 @@ pub struct Extra<'a> {
     /// maps of the top face, and its outputs (fields and contact logits) are mapped back and
     /// averaged with the plain one's.
     pub symmetrise: &'a [Symmetry],
+    /// More engines of the same top face, scales and contact head whose outputs are averaged
+    /// with the engine's (an ensemble), each symmetrised like it.
+    pub ensemble: &'a [Npe],
 }
 
 /// [`evaluate`], and what `extra` asks for: the total force read from the predicted
@@ -367,9 +370,36 @@ pub fn evaluate_with(
     let mut nodal_sq = [0.0; 2];
     let mut nodal_count = [0usize; 2];
     let maps = Symmetrised::new(p, extra.symmetrise)?;
+    for (k, e) in extra.ensemble.iter().enumerate() {
+        let why = if e.surface.rest_m != npe.surface.rest_m {
+            "another top surface"
+        } else if e.config.scales != npe.config.scales {
+            "other scales"
+        } else if e.config.contact_head != npe.config.contact_head {
+            "a contact head where the first has none, or none where it has one"
+        } else {
+            continue;
+        };
+        return Err(crate::NpeError::Data(format!(
+            "ensemble member {} has {why}: it cannot be averaged with the first engine",
+            k + 2
+        )));
+    }
     for chunk in idx.chunks(batch.max(1)) {
         let x = p.inputs(&npe.config, chunk);
-        let (out, logits) = maps.forward(npe, p, chunk, &x);
+        let (mut out, mut logits) = maps.forward(npe, p, chunk, &x);
+        for e in extra.ensemble {
+            let (oe, le) = maps.forward(e, p, chunk, &p.inputs(&e.config, chunk));
+            out.iter_mut().zip(&oe).for_each(|(a, b)| *a += b);
+            if let (Some(l), Some(le)) = (logits.as_mut(), le) {
+                l.iter_mut().zip(&le).for_each(|(a, b)| *a += b);
+            }
+        }
+        let share = 1.0 / (1 + extra.ensemble.len()) as f32;
+        out.iter_mut().for_each(|o| *o *= share);
+        if let Some(l) = logits.as_mut() {
+            l.iter_mut().for_each(|o| *o *= share);
+        }
         let b = chunk.len();
         for (j, &i) in chunk.iter().enumerate() {
             let s = &p.samples[i];

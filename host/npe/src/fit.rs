@@ -29,6 +29,10 @@ pub struct FitOptions {
     pub patience: usize,
     /// Seed of the weights, the split of set-ups and the shuffling.
     pub seed: u64,
+    /// Seed of the weights and the shuffling alone, in place of `seed`, so that engines of one
+    /// split differ only in their training run (members of an ensemble); `seed` still splits.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weight_seed: Option<u64>,
     /// Seen set-ups held out for the test.
     pub test_setups: usize,
     /// Seen set-ups held out for validation.
@@ -89,6 +93,7 @@ impl Default for FitOptions {
             learning_rate: 2e-3,
             patience: 10,
             seed: 0,
+            weight_seed: None,
             test_setups: 8,
             val_setups: 5,
             use_geometry: true,
@@ -218,6 +223,7 @@ fn start_from(path: &std::path::Path, split: &SetupSplit) -> Result<Npe> {
 
 /// Trains an engine on `p` split by set-up.
 pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
+    let run_seed = opts.weight_seed.unwrap_or(opts.seed);
     let split = SetupSplit::with_train_only(
         p,
         opts.test_setups,
@@ -297,14 +303,14 @@ pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
             // tracks them (the loaded engine lives on the plain device).
             let net = npe
                 .config
-                .init(&ad, opts.seed)?
+                .init(&ad, run_seed)?
                 .load_record(npe.net().clone().into_record());
             match (net.contact.is_some(), cfg.contact_head) {
-                (false, true) => net.with_contact_head(Some(cfg.contact_head_init(&ad, opts.seed))),
+                (false, true) => net.with_contact_head(Some(cfg.contact_head_init(&ad, run_seed))),
                 _ => net,
             }
         }
-        None => cfg.init(&ad, opts.seed)?,
+        None => cfg.init(&ad, run_seed)?,
     };
     let t0 = std::time::Instant::now();
     let report = train_split_sharded(
@@ -317,7 +323,7 @@ pub fn fit(p: &Prepared, opts: &FitOptions) -> Result<FitReport> {
             val_fraction: 0.0,
             patience: opts.patience,
             grad_clip_norm: Some(10.0),
-            seed: opts.seed,
+            seed: run_seed,
             progress: opts.progress,
             lr_schedule: opts.lr_schedule,
         },
