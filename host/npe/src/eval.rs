@@ -240,13 +240,15 @@ pub fn breakdown(
     c
 }
 
-/// The engine run on samples and on their images under maps of the top face, with the
-/// images' outputs mapped back and averaged (test-time symmetrisation). Over the whole group
-/// (identity, half turn and both mirrors) the averaged engine is equivariant, whatever its
-/// weights.
+/// Engines run on samples and on their images under maps of the top face, with the images'
+/// outputs mapped back and everything averaged (test-time symmetrisation, and ensembles).
+/// Over the whole group (identity, half turn and both mirrors) the averaged engine is
+/// equivariant, whatever its weights.
 pub struct Symmetrised {
     /// Each distinct map with its node permutation.
     maps: Vec<(Symmetry, Vec<usize>)>,
+    /// Centre of the top face the maps act about (x, y), m.
+    centre: [f64; 2],
 }
 
 impl Symmetrised {
@@ -259,60 +261,77 @@ impl Symmetrised {
                 maps.push((s, permutation(&p.rest_m, s)?));
             }
         }
-        Ok(Self { maps })
+        let c = Prepared::top_center(&p.rest_m);
+        Ok(Self {
+            maps,
+            centre: [c[0], c[1]],
+        })
     }
 
     /// Outputs (6 per node: scaled u and f, node v of sample j at `v * b + j`) and contact
-    /// logits on the samples `idx` of `p`, whose inputs are `x`, averaged with their images'.
+    /// logits on the samples `idx` of `p`, averaged over `engines` (of one top face, scales
+    /// and head layout) and each sample's images. `x` are the first engine's inputs; the
+    /// others build their own.
     pub fn forward(
         &self,
-        npe: &Npe,
+        engines: &[&Npe],
         p: &Prepared,
         idx: &[usize],
         x: &Inputs,
     ) -> (Vec<f32>, Option<Vec<f32>>) {
-        let (pos, graph, device) = npe.parts();
-        let (out, logits, _) = npe.net().forward_full(&npe.config, x, pos, graph, device);
-        let mut out = values(out);
-        let mut logits = logits.map(values);
-        if self.maps.is_empty() {
-            return (out, logits);
-        }
         let b = idx.len();
-        let c = Prepared::top_center(&p.rest_m);
-        for (map, perm) in &self.maps {
-            let images = Prepared {
+        let images: Vec<Prepared> = self
+            .maps
+            .iter()
+            .map(|(map, perm)| Prepared {
                 samples: idx
                     .iter()
-                    .map(|&i| map_sample(&p.samples[i], *map, [c[0], c[1]], perm))
+                    .map(|&i| map_sample(&p.samples[i], *map, self.centre, perm))
                     .collect(),
                 ..p.without_samples()
-            };
-            let all: Vec<usize> = (0..b).collect();
-            let xi = images.inputs(&npe.config, &all);
-            let (oi, li, _) = npe.net().forward_full(&npe.config, &xi, pos, graph, device);
-            // Node v's prediction sits at its image node perm[v], mapped (maps are involutions).
-            let oi = values(oi);
-            for (v, &w) in perm.iter().enumerate() {
+            })
+            .collect();
+        let all: Vec<usize> = (0..b).collect();
+        let mut out = vec![0.0f32; p.rest_m.len() * b * 6];
+        let mut logits: Option<Vec<f32>> = None;
+        // Adds one run's outputs; an image's node perm[v] carries node v's prediction, mapped
+        // (maps are involutions).
+        let mut add = |o: Vec<f32>, l: Option<Vec<f32>>, image: Option<&(Symmetry, Vec<usize>)>| {
+            for v in 0..p.rest_m.len() {
+                let w = image.map_or(v, |(_, perm)| perm[v]);
                 for j in 0..b {
                     let (to, from) = ((v * b + j) * 6, (w * b + j) * 6);
                     for off in [0, 3] {
-                        let w = map.vector([0, 1, 2].map(|q| f64::from(oi[from + off + q])));
-                        for q in 0..3 {
-                            out[to + off + q] += w[q] as f32;
+                        let u = [0, 1, 2].map(|c| f64::from(o[from + off + c]));
+                        let u = image.map_or(u, |(map, _)| map.vector(u));
+                        for c in 0..3 {
+                            out[to + off + c] += u[c] as f32;
                         }
                     }
-                }
-            }
-            if let (Some(l), Some(li)) = (logits.as_mut(), li.map(values)) {
-                for (v, &w) in perm.iter().enumerate() {
-                    for j in 0..b {
-                        l[v * b + j] += li[w * b + j];
+                    if let Some(l) = &l {
+                        logits.get_or_insert_with(|| vec![0.0; l.len()])[v * b + j] += l[w * b + j];
                     }
                 }
             }
+        };
+        for (k, npe) in engines.iter().enumerate() {
+            let (pos, graph, device) = npe.parts();
+            let own;
+            let x = if k == 0 {
+                x
+            } else {
+                own = p.inputs(&npe.config, idx);
+                &own
+            };
+            let (o, l, _) = npe.net().forward_full(&npe.config, x, pos, graph, device);
+            add(values(o), l.map(values), None);
+            for (image, q) in self.maps.iter().zip(&images) {
+                let xi = q.inputs(&npe.config, &all);
+                let (o, l, _) = npe.net().forward_full(&npe.config, &xi, pos, graph, device);
+                add(values(o), l.map(values), Some(image));
+            }
         }
-        let share = 1.0 / (1 + self.maps.len()) as f32;
+        let share = 1.0 / (engines.len() * (1 + self.maps.len())) as f32;
         out.iter_mut().for_each(|o| *o *= share);
         if let Some(l) = logits.as_mut() {
             l.iter_mut().for_each(|o| *o *= share);
@@ -385,21 +404,10 @@ pub fn evaluate_with(
             k + 2
         )));
     }
+    let engines: Vec<&Npe> = std::iter::once(npe).chain(extra.ensemble).collect();
     for chunk in idx.chunks(batch.max(1)) {
         let x = p.inputs(&npe.config, chunk);
-        let (mut out, mut logits) = maps.forward(npe, p, chunk, &x);
-        for e in extra.ensemble {
-            let (oe, le) = maps.forward(e, p, chunk, &p.inputs(&e.config, chunk));
-            out.iter_mut().zip(&oe).for_each(|(a, b)| *a += b);
-            if let (Some(l), Some(le)) = (logits.as_mut(), le) {
-                l.iter_mut().zip(&le).for_each(|(a, b)| *a += b);
-            }
-        }
-        let share = 1.0 / (1 + extra.ensemble.len()) as f32;
-        out.iter_mut().for_each(|o| *o *= share);
-        if let Some(l) = logits.as_mut() {
-            l.iter_mut().for_each(|o| *o *= share);
-        }
+        let (out, logits) = maps.forward(&engines, p, chunk, &x);
         let b = chunk.len();
         for (j, &i) in chunk.iter().enumerate() {
             let s = &p.samples[i];

@@ -287,7 +287,9 @@ fn symmetrised_engine_is_equivariant_under_the_whole_group() {
     let centre = Prepared::top_center(&p.rest_m);
     let run = |maps: &[Symmetry], q: &Prepared, idx: &[usize]| {
         let x = q.inputs(&npe.config, idx);
-        Symmetrised::new(q, maps).unwrap().forward(&npe, q, idx, &x)
+        Symmetrised::new(q, maps)
+            .unwrap()
+            .forward(&[&npe], q, idx, &x)
     };
     let both = [0, 1];
     let whole = run(&Symmetry::ALL, &p, &both);
@@ -323,28 +325,18 @@ fn symmetrised_engine_is_equivariant_under_the_whole_group() {
                 "{sym}, sample {j}: the plain engine's gap is {plain:.3e}"
             );
         }
-        let own = equivariance_gap(
-            &run(&[sym], &p, &both),
-            &run(&[sym], &images, &both),
-            [2, 2],
-            [1, 1],
-            sym,
-            &perm,
-        );
+        let under_sym = |maps: &[Symmetry]| {
+            let (a, b) = (run(maps, &p, &both), run(maps, &images, &both));
+            equivariance_gap(&a, &b, [2, 2], [1, 1], sym, &perm)
+        };
+        let own = under_sym(&[sym]);
         assert!(own < 1e-5, "{sym} alone: gap {own:.3e} under {sym}");
         let other = if sym == Symmetry::Rot180 {
             Symmetry::MirrorX
         } else {
             Symmetry::Rot180
         };
-        let wrong = equivariance_gap(
-            &run(&[other], &p, &both),
-            &run(&[other], &images, &both),
-            [2, 2],
-            [1, 1],
-            sym,
-            &perm,
-        );
+        let wrong = under_sym(&[other]);
         assert!(
             wrong > 1e-3,
             "{other} alone is equivariant under {sym}: {wrong:.3e}"
