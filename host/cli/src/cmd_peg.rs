@@ -8,7 +8,7 @@ use ocm_peg::replay::{npe_fields, read_path, replay, write_frames, write_npe_fie
 use ocm_peg::{
     ActionNoise, BcConfig, BcPolicy, ContactFeatures, DemoSet, DemoSettings, Evaluation,
     ExpertConfig, Grasp, InHandError, NpeEncoder, Randomisation, SceneConfig, SensorNoise,
-    TactileEncoder, TrialSpec, evaluate_expert, evaluate_policy, train_bc,
+    SpiralSearch, TactileEncoder, TrialSpec, evaluate_expert, evaluate_policy, train_bc,
 };
 use std::path::{Path, PathBuf};
 
@@ -98,6 +98,17 @@ pub enum PegCommand {
         /// Low-pass the latents with this time constant, s, instead of the policies' own.
         #[arg(long, value_parser = crate::arg_check::non_negative)]
         touch_filter_s: Option<f64>,
+        /// The hole lies up to this far from where the robot believes it, mm, instead of the
+        /// demonstrations' range.
+        #[arg(long, value_parser = crate::arg_check::non_negative)]
+        hole_error_mm: Option<f64>,
+        /// The reference expert's strategy, instead of the one the policies were cloned from.
+        #[arg(long, value_enum)]
+        expert: Option<ExpertKind>,
+        /// A trial fails when it has not inserted after this long, s, instead of the
+        /// policies' own limit.
+        #[arg(long, value_parser = crate::arg_check::positive)]
+        time_limit_s: Option<f64>,
         /// Print a JSON summary.
         #[arg(long)]
         json: bool,
@@ -123,8 +134,8 @@ pub enum PegCommand {
         /// In-hand tilt, degrees.
         #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
         tilt_deg: f64,
-        /// Take the in-hand error of demonstration N from the demos.json beside the path's
-        /// folder (overrides the three values above).
+        /// Take the in-hand error and the hole's position of demonstration N from the
+        /// demos.json beside the path's folder (overrides the three values above).
         #[arg(long)]
         demo: Option<usize>,
         /// Output folder.
@@ -216,6 +227,35 @@ pub struct SceneArgs {
     /// reads it, s (0: the latest reading alone).
     #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 0.0)]
     touch_filter_s: f64,
+    /// The hole lies up to this far from where the robot believes it, in x and in y, mm
+    /// (uniform per trial; nobody sees it, the expert included).
+    #[arg(long, value_parser = crate::arg_check::non_negative, default_value_t = 0.0)]
+    hole_error_mm: f64,
+    /// The expert's strategy.
+    #[arg(long, value_enum, default_value_t = ExpertKind::Align)]
+    expert: ExpertKind,
+    /// A trial fails when it has not inserted after this long, s.
+    #[arg(long, value_parser = crate::arg_check::positive, default_value_t = 8.0)]
+    time_limit_s: f64,
+}
+
+/// The expert's strategy.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ExpertKind {
+    /// Aligns the tip over where it believes the hole is and descends.
+    Align,
+    /// Aligns and descends, and where the tip meets the board slides it along a spiral about
+    /// the believed axis while pressing until it drops in (for --hole-error-mm).
+    Search,
+}
+
+impl ExpertKind {
+    fn config(self) -> ExpertConfig {
+        ExpertConfig {
+            search: (self == ExpertKind::Search).then(SpiralSearch::default),
+            ..ExpertConfig::default()
+        }
+    }
 }
 
 /// The default scene with the grasp `kind` (a compliant one derived from the scene's gel).
@@ -289,10 +329,14 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                         .sensor_noise
                         .noise(scene.noise_scale, scene.noise_correlation_s),
                     touch_filter_s: scene.touch_filter_s,
+                    time_limit_s: scene.time_limit_s,
                     ..scene_with(scene.grasp, scene.pad_friction)?
                 },
-                randomisation: Randomisation::default(),
-                expert: ExpertConfig::default(),
+                randomisation: Randomisation {
+                    hole_xy_m: scene.hole_error_mm * 1e-3,
+                    ..Randomisation::default()
+                },
+                expert: scene.expert.config(),
                 noise: ActionNoise::default(),
             };
             let pb = bar(count, "expert demonstrations");
@@ -313,6 +357,8 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 "grasp": set.settings.scene.grasp,
                 "sensor_noise": set.settings.scene.sensor_noise,
                 "touch_filter_s": set.settings.scene.touch_filter_s,
+                "hole_error_m": set.settings.randomisation.hole_xy_m,
+                "expert": set.settings.expert,
                 "demos_with_slip": slipped,
                 "trials_run": tried,
                 "expert_success_rate": set.demos() as f64 / tried.max(1) as f64,
@@ -387,6 +433,9 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             noise_scale,
             noise_correlation_s,
             touch_filter_s,
+            hole_error_mm,
+            expert,
+            time_limit_s,
             json,
         } => {
             let out = out.unwrap_or_else(|| policies.clone());
@@ -420,7 +469,17 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             if let Some(tau) = touch_filter_s {
                 scene.touch_filter_s = tau;
             }
-            let rand = Randomisation::default();
+            if let Some(limit) = time_limit_s {
+                scene.time_limit_s = limit;
+            }
+            let mut rand = touch.meta.randomisation.clone().unwrap_or_default();
+            if let Some(mm) = hole_error_mm {
+                rand.hole_xy_m = mm * 1e-3;
+            }
+            let reference = match expert {
+                Some(kind) => kind.config(),
+                None => touch.meta.expert.clone().unwrap_or_default(),
+            };
             let spec = TrialSpec {
                 scene: &scene,
                 randomisation: &rand,
@@ -451,7 +510,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 evals.push((ev, t.elapsed().as_secs_f64()));
             }
             let t = std::time::Instant::now();
-            let ex = evaluate_expert(&ExpertConfig::default(), spec, enc.as_ref())?;
+            let ex = evaluate_expert(&reference, spec, enc.as_ref())?;
             evals.push((ex, t.elapsed().as_secs_f64()));
             let mut w = csv::Writer::from_path(out.join("eval.csv"))?;
             w.write_record([
@@ -465,6 +524,8 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 "offset_y_m",
                 "offset_z_m",
                 "tilt_rad",
+                "hole_x_m",
+                "hole_y_m",
                 "slip_y_m",
                 "slip_z_m",
                 "slip_turn_rad",
@@ -487,6 +548,8 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                         format!("{:.6e}", e.offset_y_m),
                         format!("{:.6e}", e.offset_z_m),
                         format!("{:.6e}", e.tilt_rad),
+                        format!("{:.6e}", o.trial.hole_m[0]),
+                        format!("{:.6e}", o.trial.hole_m[1]),
                         format!("{:.6e}", o.slip[0]),
                         format!("{:.6e}", o.slip[1]),
                         format!("{:.6e}", o.slip[2]),
@@ -567,6 +630,9 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 "trained_sensor_noise": trained.sensor_noise,
                 "touch_filter_s": scene.touch_filter_s,
                 "trained_touch_filter_s": trained.touch_filter_s,
+                "hole_error_m": rand.hole_xy_m,
+                "time_limit_s": scene.time_limit_s,
+                "expert": reference,
                 "controllers": summary,
             });
             std::fs::write(
@@ -622,22 +688,21 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 None => &ContactFeatures,
             };
             let rows = read_path(&path)?;
-            let (error, demo_scene) = match demo {
+            let (error, hole_m, demo_scene) = match demo {
                 Some(k) => {
                     let dir = path
                         .parent()
                         .and_then(Path::parent)
                         .context("the path has no demos folder above it")?;
                     let set = DemoSet::load(dir)?;
-                    let error = set
+                    let trial = set
                         .outcomes
                         .iter()
                         .filter(|o| o.success)
                         .nth(k)
                         .with_context(|| format!("{} has no demonstration {k}", dir.display()))?
-                        .trial
-                        .error;
-                    (error, Some(set.settings.scene))
+                        .trial;
+                    (trial.error, trial.hole_m, Some(set.settings.scene))
                 }
                 None => (
                     InHandError {
@@ -645,6 +710,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                         offset_z_m: offset_z_mm * 1e-3,
                         tilt_rad: tilt_deg.to_radians(),
                     },
+                    [0.0; 2],
                     None,
                 ),
             };
@@ -654,7 +720,7 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                 (None, None) => SceneConfig::default(),
             };
             let pb = bar(0, "replay");
-            let frames = replay(&scene, &rows, error, enc, &mut |k, n| {
+            let frames = replay(&scene, &rows, error, hole_m, enc, &mut |k, n| {
                 pb.set_length(n as u64);
                 pb.set_position(k as u64);
             })?;

@@ -147,6 +147,21 @@ fn zero_counts_and_non_finite_numbers_are_refused_naming_the_flag() {
         "--noise-correlation-s",
         "finite",
     );
+    refused_flag(
+        &["peg", "demos", "--out", "x", "--hole-error-mm=-1"],
+        "--hole-error-mm",
+        "must be 0 or more",
+    );
+    refused_flag(
+        &["peg", "eval", "x", "--hole-error-mm", "inf"],
+        "--hole-error-mm",
+        "finite",
+    );
+    refused_flag(
+        &["peg", "demos", "--out", "x", "--time-limit-s", "0"],
+        "--time-limit-s",
+        "greater than 0",
+    );
     for args in [
         &["npe", "train", "--lr-final", "1.5"][..],
         &["learn", "train", "--lr-final=-0.1"],

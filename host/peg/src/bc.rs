@@ -14,7 +14,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::demos::DemoSet;
 use crate::error::{PegError, Result};
+use crate::expert::ExpertConfig;
 use crate::scene::{N_ACTION, N_PROPRIO, SceneConfig};
+use crate::trial::Randomisation;
 
 /// Architecture name in the checkpoints.
 pub const ARCHITECTURE: &str = "ocm-peg/bc-mlp";
@@ -73,6 +75,14 @@ pub struct PolicyMeta {
     /// be compliant: the default scene).
     #[serde(default)]
     pub scene: Option<SceneConfig>,
+    /// The randomisation of its demonstrations' trials (absent in checkpoints written before
+    /// the hole's position could be uncertain: the default).
+    #[serde(default)]
+    pub randomisation: Option<Randomisation>,
+    /// The expert it was cloned from (absent in checkpoints written before the expert could
+    /// search: the default).
+    #[serde(default)]
+    pub expert: Option<ExpertConfig>,
 }
 
 /// A trained policy: network, scalers and what it sees.
@@ -132,6 +142,8 @@ pub fn train_bc(demos: &DemoSet, touch: bool, cfg: &BcConfig) -> Result<BcTraini
                 best_loss: report.best_loss,
                 train_time_s: start.elapsed().as_secs_f64(),
                 scene: Some(demos.settings.scene.clone()),
+                randomisation: Some(demos.settings.randomisation.clone()),
+                expert: Some(demos.settings.expert.clone()),
             },
             config,
         },

@@ -121,7 +121,7 @@ pub fn evaluate_policy(
     let mut scenes = specs
         .iter()
         .map(|t| {
-            let mut s = PegScene::new(config, t.start, t.error)?;
+            let mut s = t.scene(config)?;
             s.seed_sensors(t.seed, t.index);
             Ok(s)
         })

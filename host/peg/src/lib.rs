@@ -25,7 +25,7 @@ pub use demos::{ActionNoise, DemoSet, DemoSettings};
 pub use encoder::{ContactFeatures, TactileEncoder};
 pub use error::{PegError, Result};
 pub use eval::{Evaluation, TrialSpec, evaluate_expert, evaluate_policy};
-pub use expert::ExpertConfig;
+pub use expert::{ExpertConfig, SpiralSearch};
 pub use grasp::{GelGrip, Grasp, GraspCompliance};
 pub use npe_encoder::NpeEncoder;
 pub use scene::{GripperPose, InHandError, PegScene, SceneConfig};

@@ -125,11 +125,14 @@ const MAX_FRAMES: usize = 200_000;
 
 /// Drives the gripper along `rows` (the velocity that reaches the path's pose one control step
 /// ahead, so tracking errors do not accumulate) holding the peg with `error`, one frame per
-/// control step from the path's first to its last time.
+/// control step from the path's first to its last time, with the hole's axis at `hole_m` in
+/// the path's frame (a demonstration's trial's hole; `[0, 0]` where the path's frame is the
+/// hole's).
 pub fn replay(
     config: &SceneConfig,
     rows: &[[f64; 5]],
     error: InHandError,
+    hole_m: [f64; 2],
     encoder: &dyn TactileEncoder,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Vec<Frame>> {
@@ -153,7 +156,7 @@ pub fn replay(
         z_m: p0[3],
         roll_rad: p0[4],
     };
-    let mut scene = PegScene::new(config, start, error)?;
+    let mut scene = PegScene::with_hole(config, start, error, hole_m)?;
     let mut frames = Vec::with_capacity(n + 1);
     for k in 0..=n {
         let contacts = scene.contacts()?;

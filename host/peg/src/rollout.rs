@@ -91,7 +91,7 @@ pub fn run_trial(
     controller: &mut Controller<'_>,
     noise: &mut dyn FnMut() -> [f64; N_ACTION],
 ) -> Result<(Outcome, Vec<Step>, Vec<[f64; 5]>)> {
-    let mut scene = PegScene::new(config, trial.start, trial.error)?;
+    let mut scene = trial.scene(config)?;
     scene.seed_sensors(trial.seed, trial.index);
     let mut steps = Vec::new();
     let mut path = Vec::new();

@@ -263,6 +263,8 @@ pub struct PegScene {
     peg_collider: ColliderHandle,
     config: SceneConfig,
     error: InHandError,
+    /// The hole's axis in the believed frame, m.
+    hole_m: [f64; 2],
     /// The compliant grasp's joint and springs (None: a fixed joint).
     held: Option<HeldPeg>,
     /// Largest |in-hand shift| seen at the end of a control step, per component.
@@ -286,10 +288,24 @@ fn roll_of(r: &Rotation) -> f64 {
 }
 
 impl PegScene {
-    /// Builds the scene with the gripper at `start` holding the peg with `error`.
+    /// Builds the scene with the gripper at `start` holding the peg with `error`, the hole
+    /// where the proprioception's frame says it is.
     pub fn new(config: &SceneConfig, start: GripperPose, error: InHandError) -> Result<Self> {
+        Self::with_hole(config, start, error, [0.0; 2])
+    }
+
+    /// Builds the scene with the hole's axis at `hole_m` (x, y, m) in the frame the robot
+    /// believes is the hole's: the frame of its proprioception and of [`PegScene::peg_tip`].
+    pub fn with_hole(
+        config: &SceneConfig,
+        start: GripperPose,
+        error: InHandError,
+        hole_m: [f64; 2],
+    ) -> Result<Self> {
         config.validate()?;
         for (name, v) in [
+            ("hole x_m", hole_m[0]),
+            ("hole y_m", hole_m[1]),
             ("start x_m", start.x_m),
             ("start y_m", start.y_m),
             ("start z_m", start.z_m),
@@ -339,7 +355,9 @@ impl PegScene {
             InteractionGroups::new(Group::GROUP_3, Group::GROUP_2, InteractionTestMode::And);
 
         // Board: six walls outside the hole's flats and a bottom plate, one fixed body.
-        let board = world.insert_body(RigidBodyBuilder::fixed());
+        let board = world.insert_body(
+            RigidBodyBuilder::fixed().translation(Vector::new(hole_m[0], hole_m[1], 0.0)),
+        );
         let hole_apothem = apothem + c.clearance_m;
         let (wall, span, bottom) = (0.04, 0.1, 0.005);
         for k in 0..6 {
@@ -459,6 +477,7 @@ impl PegScene {
             peg_collider,
             config: c.clone(),
             error,
+            hole_m,
             held,
             largest_shift: [0.0; 3],
             sensor_rng: ChaCha8Rng::seed_from_u64(SENSOR_SEED_SALT),
@@ -596,7 +615,14 @@ impl PegScene {
         }
     }
 
-    /// The peg's tip (centre of its bottom face) in the hole frame, m, and its roll, rad
+    /// Where the hole's axis really is in the frame the robot believes is the hole's, m
+    /// (privileged).
+    pub fn hole_m(&self) -> [f64; 2] {
+        self.hole_m
+    }
+
+    /// The peg's tip (centre of its bottom face) in the frame the robot believes is the
+    /// hole's (the hole frame when the hole is where it is believed), m, and its roll, rad
     /// (privileged).
     pub fn peg_tip(&self) -> ([f64; 3], f64) {
         let b = &self.world.bodies[self.peg];

@@ -5,7 +5,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{PegError, Result, non_negative};
-use crate::scene::{GripperPose, InHandError, SceneConfig};
+use crate::scene::{GripperPose, InHandError, PegScene, SceneConfig};
 
 /// Ranges of the randomisation (uniform, symmetric about zero unless a range is given).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -22,6 +22,10 @@ pub struct Randomisation {
     pub start_height_m: [f64; 2],
     /// Largest start roll of the gripper, rad.
     pub start_roll_rad: f64,
+    /// Largest offset of the hole from where the robot believes it, in x and in y, m (0: the
+    /// hole is where the proprioception's frame says; absent in settings written before).
+    #[serde(default)]
+    pub hole_xy_m: f64,
 }
 
 impl Default for Randomisation {
@@ -33,6 +37,7 @@ impl Default for Randomisation {
             start_xy_m: 0.005,
             start_height_m: [0.012, 0.025],
             start_roll_rad: 3f64.to_radians(),
+            hole_xy_m: 0.0,
         }
     }
 }
@@ -49,6 +54,10 @@ pub struct Trial {
     pub start: GripperPose,
     /// The peg's in-hand error.
     pub error: InHandError,
+    /// Where the hole's axis really is in the frame the robot believes is the hole's, x and
+    /// y, m (privileged: no policy sees it).
+    #[serde(default)]
+    pub hole_m: [f64; 2],
 }
 
 impl Randomisation {
@@ -60,6 +69,7 @@ impl Randomisation {
             ("tilt_rad", self.tilt_rad),
             ("start_xy_m", self.start_xy_m),
             ("start_roll_rad", self.start_roll_rad),
+            ("hole_xy_m", self.hole_xy_m),
             ("start_height_m[0]", self.start_height_m[0]),
             ("start_height_m[1]", self.start_height_m[1]),
         ] {
@@ -102,6 +112,14 @@ impl Randomisation {
         };
         // The tip hangs peg_length - peg_top below the gripper's origin at the nominal grasp.
         let z = h + config.peg_length_m - config.peg_top_m;
+        // Drawn after the rest, so that a trial keeps its pose and in-hand error whatever the
+        // hole's error.
+        let r = self.hole_xy_m;
+        let hole_m = if r > 0.0 {
+            [rng.random_range(-r..=r), rng.random_range(-r..=r)]
+        } else {
+            [0.0; 2]
+        };
         Trial {
             seed,
             index,
@@ -112,6 +130,14 @@ impl Randomisation {
                 roll_rad: roll,
             },
             error,
+            hole_m,
         }
+    }
+}
+
+impl Trial {
+    /// The scene of this trial in `config`: its start, in-hand error and hole.
+    pub fn scene(&self, config: &SceneConfig) -> Result<PegScene> {
+        PegScene::with_hole(config, self.start, self.error, self.hole_m)
     }
 }

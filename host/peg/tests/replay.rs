@@ -36,6 +36,7 @@ fn replaying_a_demonstration_reproduces_its_insertion() {
         &scene,
         &rows,
         outcome.trial.error,
+        outcome.trial.hole_m,
         &ContactFeatures,
         &mut |_, _| {},
     )
@@ -103,6 +104,7 @@ fn bad_path_files_name_line_and_column() {
         &SceneConfig::default(),
         &[[0.0, 0.0, 0.0, 0.05, 0.0], [1e12, 0.0, 0.0, 0.04, 0.0]],
         InHandError::default(),
+        [0.0; 2],
         &ContactFeatures,
         &mut |_, _| {},
     )
