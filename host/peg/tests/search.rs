@@ -100,7 +100,7 @@ fn search_direction_traces_an_archimedean_spiral() {
 /// expert sets the peg down on the board beside it and presses there until the limit; the
 /// searching one slides it onto the hole and inserts. Where the hole is where it is believed,
 /// both insert, the searching one no more than 0.3 s after the other (it presses through the
-/// hole's first millimetre at the search's 3 mm/s instead of 10).
+/// hole's first millimetre at the search's 6 mm/s instead of 10).
 #[test]
 fn the_spiral_search_finds_a_hole_that_aligning_misses() {
     let c = SceneConfig::default();
@@ -117,10 +117,11 @@ fn the_spiral_search_finds_a_hole_that_aligning_misses() {
     let searched = run(&searching(), &off, 15.0);
     assert!(searched.success, "{searched:?}");
     assert!(searched.tip_m[2] <= -c.success_depth_m);
-    // It went in where the hole really is.
+    // It went in where the hole really is, 1.3 mm from the believed axis: within the
+    // clearance, 0.5 mm towards a flat and 0.58 mm towards a corner, plus the tilt.
     let lateral = (searched.tip_m[0] - off.hole_m[0]).hypot(searched.tip_m[1] - off.hole_m[1]);
     assert!(
-        lateral < 1.2 * c.clearance_m,
+        lateral < 1.3 * c.clearance_m,
         "tip {lateral} m off the hole's axis"
     );
 
