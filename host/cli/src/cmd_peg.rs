@@ -6,9 +6,10 @@ use crate::progress::bar;
 use anyhow::Context;
 use ocm_peg::replay::{npe_fields, read_path, replay, write_frames, write_npe_fields};
 use ocm_peg::{
-    ActionNoise, BcConfig, BcPolicy, ContactFeatures, DemoSet, DemoSettings, Evaluation,
-    ExpertConfig, Grasp, InHandError, NpeEncoder, Randomisation, SceneConfig, SensorNoise,
-    SpiralSearch, TactileEncoder, TrialSpec, evaluate_expert, evaluate_policy, train_bc,
+    ActionNoise, BcConfig, BcPolicy, ContactFeatures, DaggerConfig, DemoSet, DemoSettings,
+    Evaluation, ExpertConfig, Grasp, InHandError, NpeEncoder, Randomisation, SceneConfig,
+    SensorNoise, SpiralSearch, TactileEncoder, TrialSpec, dagger, evaluate_expert, evaluate_policy,
+    train_bc,
 };
 use std::path::{Path, PathBuf};
 
@@ -54,6 +55,26 @@ pub enum PegCommand {
         /// Output folder.
         #[arg(long)]
         out: PathBuf,
+        /// After cloning the touch policy, this many DAgger rounds: each runs the policy on
+        /// fresh trials (the demonstrations' scene, randomisation and expert), labels every
+        /// state it visits with the expert's action there and clones again on all rows (0:
+        /// plain cloning).
+        #[arg(long, default_value_t = 0)]
+        dagger_rounds: usize,
+        /// Run the DAgger rounds on the no-touch baseline too (it cannot see what the expert's
+        /// labels depend on, and gets worse: see the peg README).
+        #[arg(long)]
+        dagger_baseline: bool,
+        /// Trials per DAgger round.
+        #[arg(long, value_parser = crate::arg_check::count, default_value_t = 100)]
+        dagger_trials: usize,
+        /// Seed of the DAgger rounds' trials (keep it apart from the evaluation's seeds).
+        #[arg(long, default_value_t = 5000)]
+        dagger_seed: u64,
+        /// With --dagger-rounds: the neural physics engine the demonstrations' latents came
+        /// from (required when they were made with `--npe`).
+        #[arg(long)]
+        npe: Option<PathBuf>,
         /// Print a JSON summary.
         #[arg(long)]
         json: bool,
@@ -388,10 +409,24 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             epochs,
             seed,
             out,
+            dagger_rounds,
+            dagger_baseline,
+            dagger_trials,
+            dagger_seed,
+            npe,
             json,
         } => {
+            let rounds = DaggerConfig {
+                rounds: dagger_rounds,
+                trials: dagger_trials,
+                seed: dagger_seed,
+            };
+            if dagger_rounds > 0 {
+                rounds.validate()?;
+            }
             mkdir(&out)?;
             let set = DemoSet::load(&demos)?;
+            let enc = encoder(npe.as_deref())?;
             let mut cfg = BcConfig::default();
             cfg.train.epochs = epochs;
             cfg.train.seed = seed;
@@ -399,7 +434,16 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
             cfg.weight_seed = seed;
             let mut summary = serde_json::Map::new();
             for (touch, name) in [(true, "touch"), (false, "notouch")] {
-                let tr = train_bc(&set, touch, &cfg)?;
+                let tr = if dagger_rounds == 0 || !(touch || dagger_baseline) {
+                    train_bc(&set, touch, &cfg)?
+                } else {
+                    let pb = bar(dagger_rounds, &format!("DAgger, {name}"));
+                    let tr = dagger(&set, touch, &cfg, &rounds, enc.as_ref(), &mut |r| {
+                        pb.set_position(r as u64 - 1)
+                    })?;
+                    pb.finish_and_clear();
+                    tr
+                };
                 tr.policy.save(&out.join(format!("policy_{name}.ckpt")))?;
                 ocm_learn::write_curve(
                     &out,
@@ -413,6 +457,19 @@ pub fn run(cmd: PegCommand) -> anyhow::Result<()> {
                         "{name}: {} demos, {} rows, best epoch {} (val loss {:.4}), {:.1} s",
                         m.demos, m.rows, m.best_epoch, m.best_loss, m.train_time_s
                     );
+                    for r in m.dagger.iter().flat_map(|d| &d.rounds) {
+                        println!(
+                            "  DAgger round {}: the policy inserted {:.0} % of {} trials, +{} rows \
+                             ({} in all), val loss {:.4}, {:.1} s",
+                            r.round,
+                            100.0 * r.success_rate,
+                            dagger_trials,
+                            r.rows_added,
+                            r.rows,
+                            r.best_loss,
+                            r.wall_time_s
+                        );
+                    }
                 }
                 summary.insert(name.into(), serde_json::to_value(m)?);
             }

@@ -114,6 +114,10 @@ fn zero_counts_and_non_finite_numbers_are_refused_naming_the_flag() {
         (&["tactile", "dataset", "--threads", "0"], "--threads"),
         (&["peg", "replay", "--every", "0"], "--every"),
         (&["npe", "bench", "--calls", "0"], "--calls"),
+        (
+            &["peg", "train", "x", "--out", "y", "--dagger-trials", "0"],
+            "--dagger-trials",
+        ),
     ] {
         refused_flag(args, flag, "must be at least 1");
     }
@@ -168,6 +172,21 @@ fn zero_counts_and_non_finite_numbers_are_refused_naming_the_flag() {
     ] {
         refused_flag(args, "--lr-final", "must lie between 0 and 1");
     }
+}
+
+#[test]
+fn dagger_rounds_beyond_the_cap_are_refused_before_anything_is_read() {
+    let e = fails(&[
+        "peg",
+        "train",
+        "no-such-dir",
+        "--out",
+        "no-such-out",
+        "--dagger-rounds",
+        "21",
+    ]);
+    assert!(e.contains("dagger rounds = 21: need 1 to 20"), "{e}");
+    assert!(!std::path::Path::new("no-such-out").exists());
 }
 
 #[test]

@@ -83,6 +83,50 @@ pub struct PolicyMeta {
     /// search: the default).
     #[serde(default)]
     pub expert: Option<ExpertConfig>,
+    /// The DAgger rounds that added the policy's own states to its demonstrations (absent:
+    /// cloned from the demonstrations alone).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dagger: Option<DaggerRecord>,
+}
+
+/// How a policy was trained on its own states (DAgger, Ross, Gordon and Bagnell 2011): each
+/// round runs the policy on fresh trials, labels every state it visits with the expert's
+/// action there, adds those rows to the data and clones again from scratch.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DaggerConfig {
+    /// Rounds of rollouts and retraining.
+    pub rounds: usize,
+    /// Trials per round.
+    pub trials: usize,
+    /// Seed of the rounds' trials (round r runs trials r * trials .. (r + 1) * trials of this
+    /// stream; keep it apart from the evaluation's seeds).
+    pub seed: u64,
+}
+
+/// One DAgger round: how the policy it rolled out did, and what it added.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DaggerRound {
+    /// Round number, from 1.
+    pub round: usize,
+    /// Success of the rolled-out policy on the round's trials.
+    pub success_rate: f64,
+    /// Rows (control steps) labelled and added.
+    pub rows_added: usize,
+    /// Rows trained on after the round.
+    pub rows: usize,
+    /// Validation loss of the policy trained after the round (standardised units).
+    pub best_loss: f64,
+    /// Wall time of the round (rollouts and training), s.
+    pub wall_time_s: f64,
+}
+
+/// The DAgger settings of a policy and its rounds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DaggerRecord {
+    /// The settings.
+    pub config: DaggerConfig,
+    /// The rounds, in order.
+    pub rounds: Vec<DaggerRound>,
 }
 
 /// A trained policy: network, scalers and what it sees.
@@ -144,6 +188,7 @@ pub fn train_bc(demos: &DemoSet, touch: bool, cfg: &BcConfig) -> Result<BcTraini
                 scene: Some(demos.settings.scene.clone()),
                 randomisation: Some(demos.settings.randomisation.clone()),
                 expert: Some(demos.settings.expert.clone()),
+                dagger: None,
             },
             config,
         },

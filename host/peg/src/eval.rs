@@ -107,6 +107,56 @@ pub fn evaluate_policy(
     encoder: &dyn TactileEncoder,
     progress: &mut dyn FnMut(usize),
 ) -> Result<Evaluation> {
+    run_policy(name, policy, spec, 0, encoder, progress, None)
+}
+
+/// What an expert would have done in the states a policy visited: per control step of every
+/// trial, the observation the policy read and the expert's action in that state (DAgger's
+/// labels).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Labelled {
+    /// Observations, rows of the policy's full observation length.
+    pub obs: Vec<f64>,
+    /// The expert's actions, rows of [`crate::scene::N_ACTION`].
+    pub actions: Vec<f64>,
+    /// Trial (position in the batch) of each row.
+    pub trial: Vec<usize>,
+}
+
+/// Runs `policy` on trials `first..first + spec.trials` of `spec`'s stream and labels every
+/// state it visits with `expert`'s action there. The policy's own action is executed.
+pub fn label_policy_states(
+    policy: &BcPolicy,
+    expert: &ExpertConfig,
+    spec: TrialSpec<'_>,
+    first: u64,
+    encoder: &dyn TactileEncoder,
+    progress: &mut dyn FnMut(usize),
+) -> Result<(Evaluation, Labelled)> {
+    expert.validate()?;
+    let mut labelled = Labelled::default();
+    let ev = run_policy(
+        "policy",
+        policy,
+        spec,
+        first,
+        encoder,
+        progress,
+        Some((expert, &mut labelled)),
+    )?;
+    Ok((ev, labelled))
+}
+
+/// All trials of a batch stepped in lockstep, the policy called once per control step.
+fn run_policy(
+    name: &str,
+    policy: &BcPolicy,
+    spec: TrialSpec<'_>,
+    first: u64,
+    encoder: &dyn TactileEncoder,
+    progress: &mut dyn FnMut(usize),
+    mut label: Option<(&ExpertConfig, &mut Labelled)>,
+) -> Result<Evaluation> {
     let TrialSpec {
         scene: config,
         randomisation,
@@ -115,7 +165,7 @@ pub fn evaluate_policy(
     } = spec;
     randomisation.validate()?;
     spec.validate()?;
-    let specs: Vec<_> = (0..trials as u64)
+    let specs: Vec<_> = (first..first + trials as u64)
         .map(|i| randomisation.trial(config, seed, i))
         .collect();
     let mut scenes = specs
@@ -139,6 +189,13 @@ pub fn evaluate_policy(
             .iter()
             .map(|&i| observe(&mut scenes[i], encoder))
             .collect::<Result<Vec<_>>>()?;
+        if let Some((expert, rows)) = label.as_mut() {
+            for (&i, o) in active.iter().zip(&obs) {
+                rows.obs.extend(o);
+                rows.actions.extend(expert.act(&scenes[i]));
+                rows.trial.push(i);
+            }
+        }
         let actions = policy.act_batch(&obs)?;
         for (&i, a) in active.iter().zip(actions) {
             scenes[i].step(a)?;

@@ -4,6 +4,7 @@
 
 pub mod bc;
 pub mod contact;
+pub mod dagger;
 pub mod demos;
 pub mod encoder;
 pub mod error;
@@ -19,12 +20,15 @@ pub mod scene;
 pub mod sensor;
 pub mod trial;
 
-pub use bc::{BcConfig, BcPolicy, BcTraining, train_bc};
+pub use bc::{BcConfig, BcPolicy, BcTraining, DaggerConfig, DaggerRecord, DaggerRound, train_bc};
 pub use contact::{GelFoundation, SensorContact, SensorFrame, pad_contact};
+pub use dagger::dagger;
 pub use demos::{ActionNoise, DemoSet, DemoSettings};
 pub use encoder::{ContactFeatures, TactileEncoder};
 pub use error::{PegError, Result};
-pub use eval::{Evaluation, TrialSpec, evaluate_expert, evaluate_policy};
+pub use eval::{
+    Evaluation, Labelled, TrialSpec, evaluate_expert, evaluate_policy, label_policy_states,
+};
 pub use expert::{ExpertConfig, SpiralSearch};
 pub use grasp::{GelGrip, Grasp, GraspCompliance};
 pub use npe_encoder::NpeEncoder;
